@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Installs what fme needs to build, test and run, idempotently. Safe to run again and again.
+# - libclang-dev: bindgen for the v4l crate's V4L2 bindings.
+# - ONNX Runtime 1.31.1 shared library, taken from the PyPI onnxruntime wheel (no binary downloads
+#   outside the package registries) and placed in .ort/lib, where the fme binary looks for it.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+ORT_VERSION=1.31.1
+ORT_DIR=.ort/lib
+SUDO=""
+[ "$(id -u)" -eq 0 ] || SUDO="sudo"
+
+need_apt=()
+dpkg -s libclang-dev >/dev/null 2>&1 || need_apt+=(libclang-dev)
+dpkg -s pkg-config >/dev/null 2>&1 || need_apt+=(pkg-config)
+command -v unzip >/dev/null 2>&1 || need_apt+=(unzip)
+if [ ${#need_apt[@]} -gt 0 ]; then
+  echo "setup: installing ${need_apt[*]} with apt" >&2
+  $SUDO apt-get update -q >/dev/null
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q --no-install-recommends "${need_apt[@]}" >/dev/null
+fi
+
+if [ ! -f "$ORT_DIR/libonnxruntime.so.$ORT_VERSION" ]; then
+  echo "setup: fetching ONNX Runtime $ORT_VERSION from the PyPI onnxruntime wheel" >&2
+  tmp=$(mktemp -d)
+  trap 'rm -rf "$tmp"' EXIT
+  python3 -m pip download -q --no-deps --only-binary=:all: "onnxruntime==$ORT_VERSION" -d "$tmp"
+  whl=$(ls "$tmp"/onnxruntime-*.whl)
+  mkdir -p "$ORT_DIR"
+  unzip -q -j -o "$whl" "onnxruntime/capi/libonnxruntime.so.$ORT_VERSION" -d "$ORT_DIR"
+fi
+ln -sf "libonnxruntime.so.$ORT_VERSION" "$ORT_DIR/libonnxruntime.so"
+echo "setup: ok (ONNX Runtime in $ORT_DIR)" >&2

@@ -1,0 +1,18 @@
+//! Command-line front ends of the `fme` subcommands. Each file holds one subcommand's arguments and
+//! its `run` function; `src/main.rs` only parses and dispatches.
+
+pub mod eval;
+pub mod run;
+pub mod synth;
+pub mod track;
+pub mod tune;
+
+/// Process exit code for an error: 2 for invalid configuration or usage, 1 for everything else.
+pub fn exit_code(err: &anyhow::Error) -> u8 {
+    if err.chain().any(|e| e.downcast_ref::<UsageError>().is_some()) { 2 } else { 1 }
+}
+
+/// An error in what the user asked for (bad configuration key, bad flag combination): exit code 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);

@@ -1,0 +1,1 @@
+//! The TOML configuration: one section per pipeline stage, validated with errors naming the key.

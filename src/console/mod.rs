@@ -1,0 +1,1 @@
+//! The serial field-diagnostics console (line based, read-only).

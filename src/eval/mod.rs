@@ -1,0 +1,1 @@
+//! Evaluation against ground truth: speed RMSE, distance correlation, depth metrics, plots.

@@ -1,0 +1,51 @@
+//! The `fme` binary: a thin command-line layer over the `fme` library.
+
+use clap::{Parser, Subcommand};
+use fme::cli;
+use std::process::ExitCode;
+
+#[derive(Debug, Parser)]
+#[command(name = "fme", version, about = "Fish motion estimation: activity index for fish-farm PLCs")]
+struct Cli {
+    /// Log filter (tracing env-filter syntax), e.g. `info`, `fme=debug`. RUST_LOG overrides it.
+    #[arg(long, global = true, default_value = "info")]
+    log: String,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Write a synthetic underwater fish sequence with exact ground truth.
+    Synth(cli::synth::SynthArgs),
+    /// Run the estimator on a sequence and score it against ground truth.
+    Eval(cli::eval::EvalArgs),
+    /// Run the tracker on MOTChallenge detections.
+    Track(cli::track::TrackArgs),
+    /// Grid-search tracker thresholds on sequences with ground truth.
+    Tune(cli::tune::TuneArgs),
+    /// Run the edge daemon: camera or recording in, PLC and serial out.
+    Run(cli::run::RunArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .or_else(|_| tracing_subscriber::EnvFilter::try_new(&cli.log))
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    let result = match cli.command {
+        Command::Synth(a) => cli::synth::run(a),
+        Command::Eval(a) => cli::eval::run(a),
+        Command::Track(a) => cli::track::run(a),
+        Command::Tune(a) => cli::tune::run(a),
+        Command::Run(a) => cli::run::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::from(cli::exit_code(&err))
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! Wiring of `fme run`: threads, queues, health and status, watchdog, shutdown.

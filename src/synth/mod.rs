@@ -1,0 +1,1 @@
+//! Synthetic underwater fish sequences with exact ground truth (`fme synth`).

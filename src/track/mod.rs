@@ -1,0 +1,1 @@
+//! Fixed-capacity multi-object tracker: constant-velocity Kalman filter and optimal assignment.
