@@ -15,8 +15,10 @@ setup:
 build: setup
 	$(CARGO) build --release --locked
 
+# Unit, integration and doc tests. Benchmarks are built by `make lint` (clippy --all-targets) but
+# only run by `make bench`: a benchmark measures speed, it is not a test.
 test: setup
-	$(CARGO) test --locked --all-targets
+	$(CARGO) test --locked --lib --bins --tests
 	$(CARGO) test --locked --doc
 
 fmt:
