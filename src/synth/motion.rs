@@ -94,11 +94,14 @@ pub fn swarm(n: usize, frames: usize, fps: f64, pond: &Pond, activity: &Activity
     let ring_max = (centre.x.min(pond.size.x - centre.x).min(centre.y).min(pond.size.y - centre.y) - 0.45).max(0.5);
     let agents: Vec<Agent> = (0..n)
         .map(|_| {
+            // Own stream, so the sequence length does not change what the main stream draws next:
+            // a short run is then an exact prefix of a longer one.
+            let mut brng = Rng::new(rng.next_u64());
             let mut bursts = Vec::new();
-            let mut t = rng.range(0.0, 15.0);
+            let mut t = brng.range(0.0, 15.0);
             while t < duration {
                 bursts.push(t);
-                t += rng.range(6.0, 26.0);
+                t += brng.range(6.0, 26.0);
             }
             Agent {
                 radius: rng.range(0.45, 1.0) * ring_max,

@@ -293,7 +293,7 @@ impl Renderer {
                 let amp = if up_facing < 0.0 {
                     0.0
                 } else {
-                    1.1 * (-caustic_k * (surface_z - p.z)).exp() * (0.35 + 0.65 * up_facing.max(0.0))
+                    1.1 * (-caustic_k * (surface_z - p.z)).exp() * (0.15 + 0.85 * up_facing.max(0.0))
                 };
                 let (cx, cy) = match axis {
                     2 => (p.x, p.y),
@@ -606,6 +606,10 @@ impl Renderer {
             let radius = (k.fx * p.size / c.z + 3.0 * (1.0 / c.z - 0.5).abs()).clamp(0.6, 6.0);
             let range = c.norm();
             let r2 = radius * radius;
+            let lum: [f32; 3] = [0, 1, 2].map(|ch| {
+                let tr = (-self.atten[ch] * range as f32).exp();
+                0.95 * tr + self.veil[ch] * (1.0 - tr)
+            });
             let (iu, iv) = (u.floor() as i64, v.floor() as i64);
             let reach = radius.ceil() as i64 + 1;
             for j in (iv - reach).max(0)..=(iv + reach).min(h - 1) {
@@ -620,11 +624,8 @@ impl Renderer {
                         continue;
                     }
                     let alpha = p.bright * (1.0 - (d2 / r2) as f32).powi(2) * (0.9 / (radius as f32).max(1.0));
-                    for ch in 0..3 {
-                        let tr = (-self.atten[ch] * range as f32).exp();
-                        let lum = 0.95 * tr + self.veil[ch] * (1.0 - tr);
-                        let cur = buf.light[idx][ch];
-                        buf.light[idx][ch] = cur + (lum - cur) * alpha.min(1.0);
+                    for (cur, l) in buf.light[idx].iter_mut().zip(lum) {
+                        *cur += (l - *cur) * alpha.min(1.0);
                     }
                 }
             }
