@@ -441,4 +441,18 @@ mod tests {
             }
         }
     }
+
+    #[test]
+    fn feeding_activity_rises_sharply_and_settles() {
+        let mut rng = Rng::new(9);
+        let d = 60.0;
+        let a = Activity::feeding(&mut rng, d);
+        let mean = |t0: f64, t1: f64| {
+            (0..100).map(|k| a.body_lengths_per_s(t0 + (t1 - t0) * k as f64 / 100.0)).sum::<f64>() / 100.0
+        };
+        let (before, during, after) = (mean(0.0, 0.3 * d), mean(0.3 * d + 1.0, 0.5 * d), mean(0.9 * d, d));
+        assert!(during > 1.8 * before, "{before} -> {during}");
+        assert!(after < 0.75 * during, "{during} -> {after}");
+        assert!(a.body_lengths_per_s(0.3 * d + 1.0) / a.body_lengths_per_s(0.3 * d - 0.01) > 1.6, "not sharp");
+    }
 }
