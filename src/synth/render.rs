@@ -48,6 +48,7 @@ pub struct FrameBuffers {
     /// Final colour, 8-bit RGB, row-major.
     pub rgb: Vec<u8>,
     light: Vec<[f32; 3]>,
+    tmp: Vec<[f32; 3]>,
 }
 
 impl FrameBuffers {
@@ -61,6 +62,7 @@ impl FrameBuffers {
             stamp: vec![0; n],
             rgb: vec![0; n * 3],
             light: vec![[0.0; 3]; n],
+            tmp: vec![[0.0; 3]; n],
         }
     }
 
@@ -103,6 +105,7 @@ pub struct Renderer {
     caustics: Caustics,
     noise: Vec<f32>,
     noise_sigma: f32,
+    scatter_k: f32,
     snow: Vec<Snow>,
     pond: Pond,
     seed: u64,
@@ -338,6 +341,7 @@ impl Renderer {
             caustics: Caustics::new(seed),
             noise: gaussian_table(seed),
             noise_sigma: (0.010 + 0.012 * turbid) as f32,
+            scatter_k: (0.45 * turbid) as f32,
             snow,
             pond,
             seed,
@@ -571,6 +575,7 @@ impl Renderer {
             buf.light[idx] = c;
         }
         self.draw_snow(t, buf);
+        self.forward_scatter(buf);
         let seed = mix(self.seed ^ (u64::from(frame) << 32));
         let sigma = self.noise_sigma;
         let mask = (NOISE_TABLE - 1) as u64;
@@ -582,6 +587,36 @@ impl Renderer {
                 let g = self.noise[((h >> (16 * ch)) & mask) as usize];
                 let val = cv * v + g * sigma;
                 buf.rgb[idx * 3 + ch] = (val.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+            }
+        }
+    }
+
+    /// Forward scattering and lens softness: a 3x3 binomial blur blended in more strongly the
+    /// longer the ray and the more turbid the water (also hides the ray caster's hard edges).
+    fn forward_scatter(&self, buf: &mut FrameBuffers) {
+        let (w, h) = (self.width as usize, self.height as usize);
+        for j in 0..h {
+            let row = &buf.light[j * w..(j + 1) * w];
+            let out = &mut buf.tmp[j * w..(j + 1) * w];
+            for i in 0..w {
+                let (l, r) = (row[i.saturating_sub(1)], row[(i + 1).min(w - 1)]);
+                let c = row[i];
+                out[i] = [0, 1, 2].map(|ch| 0.25 * (l[ch] + r[ch]) + 0.5 * c[ch]);
+            }
+        }
+        let k = self.scatter_k;
+        for j in 0..h {
+            let (up, down) = (j.saturating_sub(1), (j + 1).min(h - 1));
+            for i in 0..w {
+                let idx = j * w + i;
+                let (a, b, c) = (buf.tmp[up * w + i], buf.tmp[down * w + i], buf.tmp[idx]);
+                let range = buf.z[idx] * self.ray_len[idx];
+                let wgt = (0.3 + k * range).min(0.85);
+                let cur = &mut buf.light[idx];
+                for ch in 0..3 {
+                    let blur = 0.25 * (a[ch] + b[ch]) + 0.5 * c[ch];
+                    cur[ch] += (blur - cur[ch]) * wgt;
+                }
             }
         }
     }
