@@ -23,7 +23,8 @@ fn bad_arguments_exit_non_zero_naming_the_problem() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("seq");
     let o = out.to_str().unwrap();
-    let cases: [(&[&str], &str); 5] = [
+    let cases: [(&[&str], &str); 6] = [
+        (&["--preset", "swarm", "--out", o, "--k1", "-0.2"], "--k1 -0.2"),
         (&["--preset", "shoal", "--out", o], "shoal"),
         (&["--preset", "swarm", "--out", o, "--frames", "0"], "--frames"),
         (&["--preset", "swarm", "--out", o, "--fish", "201"], "--fish 201"),

@@ -22,6 +22,7 @@ fn cfg(preset: Preset, fish: usize, frames: u32, w: u32, h: u32) -> SynthConfig 
         height: h,
         water: WaterType::C3,
         layout: Layout::F,
+        k1: 0.0,
     }
 }
 
@@ -92,6 +93,24 @@ fn swarm_ground_truth_is_self_consistent() {
 }
 
 #[test]
+fn distorted_camera_keeps_centres_inside_boxes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut c = cfg(Preset::Swarm, 40, 4, 320, 192);
+    c.k1 = -0.06;
+    generate(&c, &tmp.path().join("d"), false, &|_| {}).unwrap();
+    let seq = Sequence::open(tmp.path().join("d")).unwrap();
+    assert_eq!(seq.camera.intrinsics.distortion[0], -0.06);
+    c.k1 = -0.2;
+    let err = generate(&c, &tmp.path().join("e"), false, &|_| {}).unwrap_err().to_string();
+    assert!(err.contains("--k1"), "{err}");
+    let world: BTreeMap<(u32, u32), _> = seq.world.iter().map(|r| ((r.frame, r.id), r)).collect();
+    for g in &seq.gt {
+        let px = seq.camera.world_to_pixel(&world[&(g.frame, g.id)].position).unwrap();
+        assert!(g.bbox.contains(px), "centre {px:?} outside {:?}", g.bbox);
+    }
+}
+
+#[test]
 fn reference_cube_front_faces_match_the_depth_map() {
     let tmp = tempfile::tempdir().unwrap();
     let seq = swarm(&tmp.path().join("swarm"));
@@ -120,10 +139,17 @@ fn reference_cube_front_faces_match_the_depth_map() {
 }
 
 #[test]
-fn every_fish_pixel_of_the_depth_map_lies_on_that_fish() {
+fn every_fish_pixel_of_the_depth_map_lies_on_that_fish_and_inside_its_box() {
+    for k1 in [0.0, -0.06] {
+        check_fish_pixels(k1);
+    }
+}
+
+fn check_fish_pixels(k1: f64) {
     let pond = Pond::default();
     let (w, h) = (320, 192);
-    let camera = scene::default_camera(&pond, w, h).unwrap();
+    let mut camera = scene::default_camera(&pond, w, h).unwrap();
+    camera.intrinsics.distortion[0] = k1;
     let cubes = scene::reference_cubes(Layout::F, &pond, &camera);
     let r = Renderer::new(camera, w, h, pond, WaterType::C3, &cubes, 5);
     let mut rng = Rng::new(5);
@@ -142,8 +168,17 @@ fn every_fish_pixel_of_the_depth_map_lies_on_that_fish() {
             }
             let k = id as usize - 1;
             counted[k] += 1;
+            let centre = Pixel::new(f64::from(i) + 0.5, f64::from(j) + 0.5);
+            let b = px[k].bbox;
+            assert!(
+                centre.u >= b.x - 0.01
+                    && centre.u <= b.right() + 0.01
+                    && centre.v >= b.y - 0.01
+                    && centre.v <= b.bottom() + 0.01,
+                "k1 {k1}: pixel ({i},{j}) of fish {id} outside its box {b:?}"
+            );
             let d = depth.get(i, j).unwrap();
-            let p = camera.pixel_to_world(Pixel::new(f64::from(i) + 0.5, f64::from(j) + 0.5), d).unwrap();
+            let p = camera.pixel_to_world(centre, d).unwrap();
             let s = &shapes[k];
             let on_part = s.parts.iter().any(|e| {
                 let q = e.axes.transpose() * (p.0 - e.center);
@@ -153,7 +188,7 @@ fn every_fish_pixel_of_the_depth_map_lies_on_that_fish() {
                 let n = (t.v[1] - t.v[0]).cross(&(t.v[2] - t.v[0])).normalize();
                 (p.0 - t.v[0]).dot(&n).abs() < 0.003
             });
-            assert!(on_part || on_fin, "pixel ({i},{j}) of fish {id} at {p:?} is on none of its surfaces");
+            assert!(on_part || on_fin, "k1 {k1}: pixel ({i},{j}) of fish {id} at {p:?} is on none of its surfaces");
             assert!(p.distance(&WorldPoint(m.states[2][k].position)).0 <= 0.5 * m.bodies[k].length + 0.01);
         }
     }

@@ -38,6 +38,9 @@ pub struct SynthArgs {
     /// Reference-cube layout (paper Fig. 7).
     #[arg(long, value_enum, ignore_case = true, default_value = "F")]
     pub layout: Layout,
+    /// Radial lens distortion k1 (OpenCV convention, negative = barrel; 0 = pinhole).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub k1: f64,
     /// Replace an earlier fme output folder.
     #[arg(long)]
     pub force: bool,
@@ -55,6 +58,7 @@ pub fn run(args: SynthArgs) -> anyhow::Result<()> {
         height: args.height,
         water: args.water,
         layout: args.layout,
+        k1: args.k1,
     };
     cfg.validate().map_err(|e| UsageError(e.to_string()))?;
     let total = u64::from(cfg.frames) * if cfg.preset == Preset::PostprocSuite { 18 } else { 1 };
@@ -66,7 +70,10 @@ pub fn run(args: SynthArgs) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
     let result = synth::generate(&cfg, &args.out, args.force, &|n| bar.inc(n));
     bar.finish_and_clear();
-    let summary = result.with_context(|| format!("fme synth could not write {}", args.out.display()))?;
+    let summary = match result {
+        Err(synth::Error::Config(msg)) => return Err(UsageError(msg).into()),
+        r => r.with_context(|| format!("fme synth could not write {}", args.out.display()))?,
+    };
     let secs = started.elapsed().as_secs_f64();
     println!(
         "wrote {} sequence(s), {} frames to {} in {:.1} s ({:.1} frames/s)",

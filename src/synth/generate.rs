@@ -63,6 +63,8 @@ pub struct SynthConfig {
     pub water: WaterType,
     /// Reference-cube layout.
     pub layout: Layout,
+    /// Radial lens distortion `k1` (OpenCV; negative = barrel), 0 for a pinhole.
+    pub k1: f64,
 }
 
 impl Default for SynthConfig {
@@ -77,6 +79,7 @@ impl Default for SynthConfig {
             height: 384,
             water: WaterType::C3,
             layout: Layout::F,
+            k1: 0.0,
         }
     }
 }
@@ -101,6 +104,9 @@ impl SynthConfig {
                 return Err(Error::Config(format!("{name} {v} must be within 16..=8192 pixels")));
             }
         }
+        if !self.k1.is_finite() || self.k1.abs() > 0.3 {
+            return Err(Error::Config(format!("--k1 {} must be within [-0.3, 0.3]", self.k1)));
+        }
         Ok(())
     }
 }
@@ -121,7 +127,22 @@ pub struct Summary {
 pub fn generate(cfg: &SynthConfig, out: &Path, force: bool, progress: &(dyn Fn(u64) + Sync)) -> Result<Summary, Error> {
     cfg.validate()?;
     let pond = Pond::default();
-    let camera = scene::default_camera(&pond, cfg.width, cfg.height)?;
+    let mut camera = scene::default_camera(&pond, cfg.width, cfg.height)?;
+    camera.intrinsics.distortion[0] = cfg.k1;
+    if cfg.k1 < 0.0 {
+        // Barrel distortion folds over at r^2 = -1/(3 k1), where r (1 + k1 r^2) peaks at 2/3 of that
+        // radius: the image corners must stay well inside the peak or the lens cannot be inverted.
+        let k = &camera.intrinsics;
+        let corner = ((k.cx / k.fx).powi(2) + (k.cy / k.fy).powi(2)).sqrt();
+        let peak = 2.0 / 3.0 * (-1.0 / (3.0 * cfg.k1)).sqrt();
+        if peak < 1.1 * corner {
+            return Err(Error::Config(format!(
+                "--k1 {} folds the image over before its corners (this camera allows k1 >= {:.3})",
+                cfg.k1,
+                -4.0 / (27.0 * (1.1 * corner).powi(2))
+            )));
+        }
+    }
     let cubes = scene::reference_cubes(cfg.layout, &pond, &camera);
     let renderer = Renderer::new(camera, cfg.width, cfg.height, pond, cfg.water, &cubes, cfg.seed);
     let stage = StagedDir::create(out, force)?;
