@@ -104,8 +104,8 @@ pub fn swarm(n: usize, frames: usize, fps: f64, pond: &Pond, activity: &Activity
                 t += brng.range(6.0, 26.0);
             }
             Agent {
-                radius: rng.range(0.45, 1.0) * ring_max,
-                depth: rng.range(0.55, pond.size.z - 0.6),
+                radius: rng.range(0.5, 0.9) * ring_max,
+                depth: pond.size.z * rng.range(0.28, 0.62),
                 pace: rng.range(0.8, 1.2),
                 wander: [rng.range(0.0, TAU), rng.range(0.0, TAU), rng.range(0.12, 0.3), rng.range(0.0, TAU)],
                 bursts,
@@ -191,7 +191,7 @@ fn steer(
             n_rep += 1;
         } else if dist2 < (3.0 * l) * (3.0 * l) {
             align += vel[j].try_normalize(1e-9).unwrap_or_else(Vector3::zeros);
-        } else if dist2 < (7.0 * l) * (7.0 * l) {
+        } else if dist2 < (10.0 * l) * (10.0 * l) {
             attract += d / dist2.sqrt();
         }
     }
@@ -200,7 +200,7 @@ fn steer(
         dir += rep.try_normalize(1e-9).unwrap_or_else(Vector3::zeros) * 1.6;
     } else {
         dir += align.try_normalize(1e-9).unwrap_or_else(Vector3::zeros) * 0.5
-            + attract.try_normalize(1e-9).unwrap_or_else(Vector3::zeros) * 0.25;
+            + attract.try_normalize(1e-9).unwrap_or_else(Vector3::zeros) * 0.7;
     }
     // Walls, surface, floor and the camera corner push fish back well before they reach them.
     let margin = 0.55;
