@@ -11,6 +11,12 @@ use fme::synth::{Preset, SynthConfig, WaterType, generate};
 use std::time::Instant;
 
 fn main() {
+    // `cargo test --all-targets` (make test) runs bench targets without `--bench`: do nothing then,
+    // benchmarks are not tests.
+    if !std::env::args().any(|a| a == "--bench") {
+        println!("synth benchmark skipped (run it with `cargo bench --bench synth`)");
+        return;
+    }
     let frames: u32 = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(150);
     let tmp = std::env::temp_dir().join(format!("fme-synth-bench-{}", std::process::id()));
     println!("fme synth benchmark: 640x384, {frames} frames, {} rayon threads", rayon::current_num_threads());
