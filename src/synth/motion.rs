@@ -257,7 +257,7 @@ pub fn single(frames: usize, fps: f64, pond: &Pond, rng: &mut Rng) -> Motion {
     let mut terms = [[(0.0, 0.0, 0.0); 2]; 3];
     for (axis, t) in terms.iter_mut().enumerate() {
         for (k, term) in t.iter_mut().enumerate() {
-            let period = rng.range(9.0, 20.0) / (k as f64 + 1.0);
+            let period = rng.range(16.0, 32.0) / (k as f64 + 1.0);
             *term = (amp[axis][k] * rng.range(0.8, 1.25), TAU / period, rng.range(0.0, TAU));
         }
     }
