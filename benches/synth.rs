@@ -10,6 +10,16 @@ use fme::synth::scene::{self, Layout, Pond};
 use fme::synth::{Preset, SynthConfig, WaterType, generate};
 use std::time::Instant;
 
+/// CPU seconds (user + system) this process has used so far, from `/proc/self/stat` (Linux; 0 elsewhere).
+fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else { return 0.0 };
+    // Fields after the parenthesised command name; utime and stime are fields 14 and 15 (1-based).
+    let rest = stat.rsplit_once(')').map(|(_, r)| r).unwrap_or("");
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (ticks(11) + ticks(12)) / 100.0 // USER_HZ is 100 on Linux
+}
+
 fn main() {
     // `cargo test --all-targets` (make test) runs bench targets without `--bench`: do nothing then,
     // benchmarks are not tests.
@@ -24,12 +34,20 @@ fn main() {
         let cfg = SynthConfig { preset: Preset::Swarm, fish, frames, seed: 7, ..SynthConfig::default() };
         let out = tmp.join(format!("swarm{fish}"));
         let t0 = Instant::now();
+        let c0 = cpu_seconds();
         if let Err(e) = generate(&cfg, &out, true, &|_| {}) {
             eprintln!("generate failed: {e}");
             std::process::exit(1);
         }
         let s = t0.elapsed().as_secs_f64();
-        println!("swarm {fish:>3} fish, full pipeline to disk: {:.1} frames/s ({s:.2} s)", f64::from(frames) / s);
+        let cpu_ms = (cpu_seconds() - c0) * 1000.0 / f64::from(frames);
+        println!(
+            "swarm {fish:>3} fish, full pipeline to disk: {:.1} frames/s ({s:.2} s wall; {cpu_ms:.1} CPU ms/frame, \
+             i.e. {:.0} frames/s if {} cores were free)",
+            f64::from(frames) / s,
+            rayon::current_num_threads() as f64 * 1000.0 / cpu_ms.max(1e-9),
+            rayon::current_num_threads()
+        );
     }
     let _ = std::fs::remove_dir_all(&tmp);
 
