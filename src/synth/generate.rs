@@ -182,7 +182,7 @@ pub fn generate(cfg: &SynthConfig, out: &Path, force: bool, progress: &(dyn Fn(u
                 sequences.push(out.join(&s.name));
             }
             let p = stage.path().join("scenes.txt");
-            std::fs::write(&p, list).map_err(|e| crate::sequence::Error::Io { path: p, source: e })?;
+            std::fs::write(&p, list).map_err(|e| crate::sequence::Error::Io { path: p, error: e })?;
         }
     }
     let n = sequences.len() as u64 * u64::from(cfg.frames);
@@ -235,7 +235,7 @@ impl Base<'_> {
                     let rgb = image::RgbImage::from_raw(w, h, buf.rgb.clone())
                         .ok_or_else(|| Error::Config("internal: frame buffer size".into()))?;
                     let jpeg = encode_jpeg(&rgb, JPEG_QUALITY)
-                        .map_err(|source| crate::sequence::Error::Image { path: writer.frame_path(frame), source })?;
+                        .map_err(|error| crate::sequence::Error::Image { path: writer.frame_path(frame), error })?;
                     writer.write_frame_bytes(frame, &jpeg)?;
                     writer.write_depth(frame, &buf.depth_map(w, h))?;
                     progress(1);
