@@ -9,7 +9,7 @@
 //! | [`fish`] | procedural fish bodies with a beating tail |
 //! | [`motion`] | presets: swarm (schooling + milling), feeding, single, the 18 post-processing scenes |
 //! | [`render`] | ray caster, image formation, caustics, snow, noise; exact amodal boxes and depth |
-//! | [`generate`] | runs a preset and writes the sequence(s) with [`crate::sequence`] |
+//! | [`mod@generate`] | runs a preset and writes the sequence(s) with [`crate::sequence`] |
 //!
 //! Same arguments, same bytes: all randomness comes from [`rng::Rng`] seeded by `--seed`, and frames
 //! rendered in parallel are written to their own files.
