@@ -5,7 +5,7 @@ CARGO ?= cargo
 BIN := target/release/fme
 DEMO_OUT ?= target/demo
 
-.PHONY: all setup build test lint fmt clippy demo bench clean
+.PHONY: all setup build test lint fmt clippy demo bench bench-synth clean
 
 all: build
 
@@ -34,6 +34,9 @@ demo: build
 
 bench: build
 	bash scripts/bench.sh
+
+bench-synth: setup
+	$(CARGO) bench --locked --bench synth
 
 clean:
 	$(CARGO) clean
