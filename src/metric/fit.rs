@@ -239,8 +239,10 @@ mod tests {
     #[test]
     fn linear_fit_recovers_known_scale_and_shift() {
         // Data exactly linear: D = -2 R + 7.
-        let refs: References =
-            [0.5, 1.0, 1.5, 2.5].iter().map(|&r| ReferencePair { relative: r, depth: Metres(-2.0 * r + 7.0) }).collect();
+        let refs: References = [0.5, 1.0, 1.5, 2.5]
+            .iter()
+            .map(|&r| ReferencePair { relative: r, depth: Metres(-2.0 * r + 7.0) })
+            .collect();
         let f = fit(DepthModel::Linear, &refs).unwrap();
         assert!((f.s + 2.0).abs() < 1e-12 && (f.t - 7.0).abs() < 1e-12, "{f:?}");
         assert!(f.residual_rms.0 < 1e-12);

@@ -100,7 +100,8 @@ impl TrackFilter {
                     out.height_corrected = true;
                 }
                 // Rebuild around the edges that moved least since the previous raw box.
-                let x = if (raw.x - prev.x).abs() <= (raw.right() - prev.right()).abs() { raw.x } else { raw.right() - w };
+                let x =
+                    if (raw.x - prev.x).abs() <= (raw.right() - prev.right()).abs() { raw.x } else { raw.right() - w };
                 let y = if (raw.y - prev.y).abs() <= (raw.bottom() - prev.bottom()).abs() {
                     raw.y
                 } else {
@@ -116,7 +117,12 @@ impl TrackFilter {
 
     /// The depth-jump detector (eq. 4) and its EWMA correction. Returns the corrected depth and
     /// whether the detector fired. `None` in, `None` out (the state is left untouched).
-    pub fn correct_depth(&mut self, cfg: &PostprocessConfig, t: Seconds, depth: Option<Metres>) -> (Option<Metres>, bool) {
+    pub fn correct_depth(
+        &mut self,
+        cfg: &PostprocessConfig,
+        t: Seconds,
+        depth: Option<Metres>,
+    ) -> (Option<Metres>, bool) {
         let Some(d) = depth.filter(|d| d.0.is_finite() && d.0 > 0.0) else {
             return (None, false);
         };
