@@ -358,10 +358,10 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
 pub fn write_series(path: &Path, series: &[SeriesRow]) -> Result<(), EvalError> {
     let err = |e: std::io::Error| EvalError::Output { path: path.to_path_buf(), msg: e.to_string() };
     let mut out = std::io::BufWriter::new(std::fs::File::create(path).map_err(err)?);
-    let opt = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6}"));
+    let opt = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x}"));
     writeln!(out, "frame,t,true_mps,est_mps,n_fish").map_err(err)?;
     for r in series {
-        writeln!(out, "{},{:.6},{},{},{}", r.frame, r.t, opt(r.true_mps), opt(r.est_mps), r.n_fish).map_err(err)?;
+        writeln!(out, "{},{},{},{},{}", r.frame, r.t, opt(r.true_mps), opt(r.est_mps), r.n_fish).map_err(err)?;
     }
     out.flush().map_err(err)
 }
