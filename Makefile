@@ -5,7 +5,7 @@ CARGO ?= cargo
 BIN := target/release/fme
 DEMO_OUT ?= target/demo
 
-.PHONY: all setup build test lint fmt clippy demo bench clean
+.PHONY: all setup build test lint fmt clippy demo bench bench-core clean
 
 all: build
 
@@ -32,6 +32,10 @@ demo: build
 
 bench: build
 	bash scripts/bench.sh
+
+# Per-frame cost of post-processing + motion (issue 3); a benchmark, not a test.
+bench-core:
+	$(CARGO) bench --locked --bench core
 
 clean:
 	$(CARGO) clean
