@@ -13,8 +13,9 @@ fn frame(i: usize, n: u32, obs: &mut Vec<TrackObservation>) -> Seconds {
     let t = i as f64 / 30.0;
     for id in 0..n {
         let ph = id as f64 * 0.37;
-        let w = 40.0 + 6.0 * (t * 9.0 + ph).sin() + if (i + id as usize) % 17 == 0 { 25.0 } else { 0.0 };
-        let d = 2.0 + (id % 5) as f64 * 0.4 + 0.2 * (t + ph).sin() - if (i + id as usize) % 23 == 0 { 1.0 } else { 0.0 };
+        let w = 40.0 + 6.0 * (t * 9.0 + ph).sin() + if (i + id as usize).is_multiple_of(17) { 25.0 } else { 0.0 };
+        let d = 2.0 + (id % 5) as f64 * 0.4 + 0.2 * (t + ph).sin()
+            - if (i + id as usize).is_multiple_of(23) { 1.0 } else { 0.0 };
         let u = 320.0 + 200.0 * (t * 0.5 + ph).sin();
         let v = 192.0 + 120.0 * (t * 0.3 + ph).cos();
         obs.push(TrackObservation { id, bbox: PixelBox::new(u - w / 2.0, v - 8.0, w, 16.0), depth: Some(Metres(d)) });

@@ -36,15 +36,15 @@ fn steady_state_update_allocates_nothing() {
     let cam = Camera { intrinsics: k, pose };
     let mut est = ActivityEstimator::new(cam, MotionConfig::default(), PostprocessConfig::default());
     let mut obs: Vec<TrackObservation> = Vec::with_capacity(100);
-    let mut frame = |i: usize, obs: &mut Vec<TrackObservation>| {
+    let frame = |i: usize, obs: &mut Vec<TrackObservation>| {
         obs.clear();
         let t = i as f64 / 30.0;
         for id in 0..100u32 {
             let ph = id as f64 * 0.37;
             // Wobbling sizes and occasional depth jumps so both detectors and their EWMAs run.
-            let w = 40.0 + 6.0 * (t * 9.0 + ph).sin() + if (i + id as usize) % 17 == 0 { 25.0 } else { 0.0 };
+            let w = 40.0 + 6.0 * (t * 9.0 + ph).sin() + if (i + id as usize).is_multiple_of(17) { 25.0 } else { 0.0 };
             let d = 2.0 + (id % 5) as f64 * 0.4 + 0.2 * (t + ph).sin()
-                - if (i + id as usize) % 23 == 0 { 1.0 } else { 0.0 };
+                - if (i + id as usize).is_multiple_of(23) { 1.0 } else { 0.0 };
             let u = 320.0 + 200.0 * (t * 0.5 + ph).sin();
             let v = 192.0 + 120.0 * (t * 0.3 + ph).cos();
             obs.push(TrackObservation {

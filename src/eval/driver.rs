@@ -161,7 +161,7 @@ pub struct EvalReport {
 
 enum Fitted {
     Ss(ScaleShift),
-    Reg(Regressor),
+    Reg(Box<Regressor>),
 }
 
 impl Fitted {
@@ -180,9 +180,9 @@ fn fit_frame(opts: &EvalOptions, refs: &References) -> Result<Fitted, crate::met
         FitChoice::Robust => {
             Fitted::Ss(fit_robust(DepthModel::Inverse, refs, opts.robust_inlier.0, opts.robust_inlier.1)?)
         }
-        FitChoice::Poly2 => Fitted::Reg(Regressor::fit(RegressorKind::Poly2, refs)?),
-        FitChoice::Tree => Fitted::Reg(Regressor::fit(RegressorKind::Tree, refs)?),
-        FitChoice::Knn => Fitted::Reg(Regressor::fit(RegressorKind::Knn, refs)?),
+        FitChoice::Poly2 => Fitted::Reg(Box::new(Regressor::fit(RegressorKind::Poly2, refs)?)),
+        FitChoice::Tree => Fitted::Reg(Box::new(Regressor::fit(RegressorKind::Tree, refs)?)),
+        FitChoice::Knn => Fitted::Reg(Box::new(Regressor::fit(RegressorKind::Knn, refs)?)),
     })
 }
 
@@ -220,11 +220,12 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
     // True swarm speed per frame: mean |v| of the fish visible in it.
     let mut true_sum = vec![(0.0f64, 0usize); seq.len() as usize + 1];
     for r in &seq.world {
-        if r.visibility > 0.0 && r.velocity.iter().all(|v| v.is_finite()) {
-            if let Some(s) = true_sum.get_mut(r.frame as usize) {
-                s.0 += r.velocity.norm();
-                s.1 += 1;
-            }
+        if r.visibility > 0.0
+            && r.velocity.iter().all(|v| v.is_finite())
+            && let Some(s) = true_sum.get_mut(r.frame as usize)
+        {
+            s.0 += r.velocity.norm();
+            s.1 += 1;
         }
     }
     let mut est = ActivityEstimator::new(seq.camera, opts.motion, opts.postprocess);

@@ -217,11 +217,12 @@ pub fn fit_robust(
     let _ = count;
     let mut f = least_squares(model, refs, mask)?;
     let (mask2, count2, _) = inliers_of(&f);
-    if count2 >= 2 && mask2 != mask {
-        if let Ok(f2) = least_squares(model, refs, mask2) {
-            f = f2;
-            mask = mask2;
-        }
+    if count2 >= 2
+        && mask2 != mask
+        && let Ok(f2) = least_squares(model, refs, mask2)
+    {
+        f = f2;
+        mask = mask2;
     }
     let usable_mask = refs.iter().enumerate().filter(|(_, p)| usable(p)).fold(0u32, |m, (i, _)| m | (1 << i));
     f.rejected = usable_mask & !mask;

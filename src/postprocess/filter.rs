@@ -62,11 +62,9 @@ impl TrackFilter {
         let t = t.0;
         let keep = cfg.fluctuation_window.0.max(cfg.box_ewma_window.0);
         // Time must increase; a gap longer than the window makes the history meaningless.
-        if let Some(last) = self.sizes.back() {
-            if !(t > last.t) || t - last.t > keep {
-                self.sizes.clear();
-                self.prev_raw = None;
-            }
+        if self.sizes.back().is_some_and(|last| t <= last.t || t - last.t > keep || t.is_nan()) {
+            self.sizes.clear();
+            self.prev_raw = None;
         }
         while self.sizes.front().is_some_and(|s| !within(s.t, t, keep)) || self.sizes.is_full() {
             self.sizes.pop_front();
@@ -128,11 +126,9 @@ impl TrackFilter {
         };
         let t = t.0;
         let window = cfg.depth_ewma_window.0;
-        if let Some(&(last_t, _)) = self.depths.back() {
-            if !(t > last_t) || t - last_t > window {
-                self.depths.clear();
-                self.jump_since = None;
-            }
+        if self.depths.back().is_some_and(|&(last_t, _)| t <= last_t || t - last_t > window || t.is_nan()) {
+            self.depths.clear();
+            self.jump_since = None;
         }
         while self.depths.front().is_some_and(|s| !within(s.0, t, window)) || self.depths.is_full() {
             self.depths.pop_front();

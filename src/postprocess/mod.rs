@@ -49,14 +49,16 @@ pub struct PostprocessConfig {
 
 impl Default for PostprocessConfig {
     fn default() -> Self {
+        // The paper's frame counts at its 30 fps.
+        const FPS: f64 = 30.0;
         Self {
             box_fluctuation: true,
-            fluctuation_window: Seconds(30.0 / 30.0),
-            box_ewma_window: Seconds(5.0 / 30.0),
+            fluctuation_window: Seconds(30.0 / FPS),
+            box_ewma_window: Seconds(5.0 / FPS),
             fluctuation_min_history: 3,
             depth_jump: true,
             depth_jump_threshold: Metres(0.6),
-            depth_ewma_window: Seconds(30.0 / 30.0),
+            depth_ewma_window: Seconds(30.0 / FPS),
             depth_max_hold: Seconds(1.0),
         }
     }
