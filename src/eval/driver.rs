@@ -1,7 +1,7 @@
 //! The evaluation driver: run the estimator over a sequence and score it against ground truth.
 
 use super::metrics::{DepthAccuracy, bias, distance_correlation, quantile, rmse};
-use super::relative::{RelativeGtParams, relative_from_depth};
+use super::relative::{RelativeGtParams, sample_relative};
 use super::{BoxesChoice, EvalError};
 use crate::geometry::{Pixel, PixelBox};
 use crate::metric::regressors::{Regressor, RegressorKind};
@@ -232,7 +232,7 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
     let mut est_raw = ActivityEstimator::new(seq.camera, opts.motion, PostprocessConfig::off());
     let mut boxes: Vec<(u32, PixelBox)> = Vec::new();
     let mut obs: Vec<TrackObservation> = Vec::new();
-    let (mut gt_map, mut rel_map) = (Vec::new(), Vec::new());
+    let mut gt_map = Vec::new();
     let mut depth_acc = DepthAccuracy::default();
     let mut last_fit: Option<Fitted> = None;
     let (mut fit_failures, mut rejected, mut residual_sum, mut residual_n) = (0usize, 0u64, 0.0, 0usize);
@@ -252,11 +252,9 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         to_metres(&dm, &mut gt_map);
         let gt = RelativeMap { data: &gt_map, width: w, height: h };
         if estimated {
-            relative_from_depth(&opts.relative, &dm, frame, &mut rel_map);
-            let rel = RelativeMap { data: &rel_map, width: w, height: h };
             let mut refs = References::new();
             for (i, (px, d)) in ref_px.iter().enumerate() {
-                if let Some(mut r) = sample_median(&rel, *px, radius, |_| true) {
+                if let Some(mut r) = sample_relative(&opts.relative, &dm, frame, *px, radius) {
                     if i < opts.foul_refs {
                         r *= 1.5;
                     }
@@ -275,10 +273,9 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
                 Err(_) => fit_failures += 1,
             }
         }
-        let rel = RelativeMap { data: &rel_map, width: w, height: h };
         let depth_at = |px: Pixel| -> Option<Metres> {
             if estimated {
-                let r = sample_median(&rel, px, radius, |_| true)?;
+                let r = sample_relative(&opts.relative, &dm, frame, px, radius)?;
                 last_fit.as_ref()?.depth(r)
             } else {
                 sample_median(&gt, px, radius, |_| true).map(Metres)
