@@ -1,6 +1,8 @@
 //! `fme eval`: Run the estimator on a sequence and score it against ground truth.
 
-use crate::eval::{BoxesChoice, DepthChoice, EvalOptions, EvalReport, FitChoice, evaluate, plot, write_series};
+use crate::eval::{
+    BoxesChoice, DepthChoice, DepthSample, EvalOptions, EvalReport, FitChoice, evaluate, plot, write_series,
+};
 use crate::postprocess::PostprocessConfig;
 use crate::sequence::Sequence;
 use crate::units::Seconds;
@@ -37,6 +39,10 @@ pub struct EvalArgs {
     /// Speed span in seconds (0 = frame to frame, the paper's choice).
     #[arg(long, default_value_t = 0.0)]
     pub speed_span: f64,
+    /// How a fish's depth is read: `centre` (5x5 median at the box centre, the paper) or `box`
+    /// (25% quantile over the central half of the box).
+    #[arg(long, value_enum, default_value_t = DepthSample::Centre)]
+    pub depth_sample: DepthSample,
     /// relative-gt: foul this many reference objects (their relative depth reads 50% nearer).
     #[arg(long, default_value_t = 0)]
     pub foul_refs: usize,
@@ -98,6 +104,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         fit: args.fit,
         postprocess: if args.no_postprocess { PostprocessConfig::off() } else { PostprocessConfig::default() },
         foul_refs: args.foul_refs,
+        depth_sample: args.depth_sample,
         ..Default::default()
     };
     opts.motion.speed_span = Seconds(args.speed_span);

@@ -1,11 +1,13 @@
 //! The evaluation driver: run the estimator over a sequence and score it against ground truth.
 
 use super::metrics::{DepthAccuracy, bias, distance_correlation, quantile, rmse};
-use super::relative::{RelativeGtParams, sample_relative};
+use super::relative::{RelativeGtParams, relative_at, sample_relative};
 use super::{BoxesChoice, EvalError};
 use crate::geometry::{Pixel, PixelBox};
 use crate::metric::regressors::{Regressor, RegressorKind};
-use crate::metric::{DepthModel, ReferencePair, References, RelativeMap, ScaleShift, fit, fit_robust, sample_median};
+use crate::metric::{
+    DepthModel, ReferencePair, References, RelativeMap, ScaleShift, fit, fit_robust, sample_box_quantile, sample_median,
+};
 use crate::motion::{ActivityEstimator, MotionConfig, TrackObservation};
 use crate::postprocess::PostprocessConfig;
 use crate::sequence::{DepthMap, Sequence};
@@ -43,6 +45,17 @@ pub enum FitChoice {
     Knn,
 }
 
+/// How a fish's depth is read from the depth map (`--depth-sample`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DepthSample {
+    /// Median of a 5x5 window at the (corrected) box centre: the paper's "depth at the centre point".
+    Centre,
+    /// 25% quantile of depth over the central half of the box (nearest quarter: the fish, not the
+    /// wall behind a thin or bent fish).
+    Box,
+}
+
 /// Everything `fme eval` can vary.
 #[derive(Debug, Clone)]
 pub struct EvalOptions {
@@ -64,6 +77,8 @@ pub struct EvalOptions {
     pub window_radius: usize,
     /// Inlier tolerance of the robust fit: max(absolute, relative * depth).
     pub robust_inlier: (Metres, f64),
+    /// How fish depth is sampled.
+    pub depth_sample: DepthSample,
 }
 
 impl Default for EvalOptions {
@@ -78,6 +93,7 @@ impl Default for EvalOptions {
             foul_refs: 0,
             window_radius: 2,
             robust_inlier: (Metres(0.1), 0.05),
+            depth_sample: DepthSample::Centre,
         }
     }
 }
@@ -112,6 +128,10 @@ pub struct EvalReport {
     pub fit: Option<FitChoice>,
     /// Post-processing on in the main run.
     pub postprocess: bool,
+    /// How fish depth was sampled.
+    pub depth_sample: DepthSample,
+    /// Speed span, seconds (0 = frame to frame).
+    pub speed_span_s: f64,
     /// Frames with both a true and an estimated swarm speed (the scored frames).
     pub frames: usize,
     /// RMSE of the estimated swarm speed, m/s.
@@ -273,12 +293,20 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
                 Err(_) => fit_failures += 1,
             }
         }
-        let depth_at = |px: Pixel| -> Option<Metres> {
-            if estimated {
-                let r = sample_relative(&opts.relative, &dm, frame, px, radius)?;
-                last_fit.as_ref()?.depth(r)
-            } else {
-                sample_median(&gt, px, radius, |_| true).map(Metres)
+        let depth_at = |o: &TrackObservation, px: Pixel| -> Option<Metres> {
+            let fitted = |r: f64| last_fit.as_ref()?.depth(r);
+            match (estimated, opts.depth_sample) {
+                (true, DepthSample::Centre) => fitted(sample_relative(&opts.relative, &dm, frame, px, radius)?),
+                (false, DepthSample::Centre) => sample_median(&gt, px, radius, |_| true).map(Metres),
+                (est, DepthSample::Box) => {
+                    let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
+                    if est {
+                        // Larger relative inverse depth is nearer: the 75% quantile of R.
+                        fitted(sample_box_quantile(&b, 0.5, 0.75, |p| relative_at(&opts.relative, &dm, frame, p))?)
+                    } else {
+                        sample_box_quantile(&b, 0.5, 0.25, |p| gt.at(p)).map(Metres)
+                    }
+                }
             }
         };
         obs.clear();
@@ -286,13 +314,17 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         if estimated {
             for o in &obs {
                 let c = o.bbox.center();
-                if let (Some(e), Some(g)) = (depth_at(c), sample_median(&gt, c, radius, |_| true)) {
+                let g = match opts.depth_sample {
+                    DepthSample::Centre => sample_median(&gt, c, radius, |_| true),
+                    DepthSample::Box => sample_box_quantile(&o.bbox, 0.5, 0.25, |p| gt.at(p)),
+                };
+                if let (Some(e), Some(g)) = (depth_at(o, c), g) {
                     depth_acc.add(e.0, g);
                 }
             }
         }
-        let s = est.update_with(t, &obs, |_, c| depth_at(c));
-        let s_raw = est_raw.update_with(t, &obs, |_, c| depth_at(c));
+        let s = est.update_with(t, &obs, &depth_at);
+        let s_raw = est_raw.update_with(t, &obs, &depth_at);
         boxes_corrected += u64::from(s.boxes_corrected);
         depths_corrected += u64::from(s.depths_corrected);
         let (ts, tn) = true_sum[frame as usize];
@@ -328,6 +360,8 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         depth: opts.depth,
         fit: estimated.then_some(opts.fit),
         postprocess: opts.postprocess.box_fluctuation || opts.postprocess.depth_jump,
+        depth_sample: opts.depth_sample,
+        speed_span_s: opts.motion.speed_span.0,
         frames: scored.len(),
         speed_rmse_mps: rmse(&est_v, &truth).unwrap_or(f64::NAN),
         speed_distcorr: distance_correlation(&est_v, &truth).unwrap_or(0.0),

@@ -13,7 +13,7 @@ pub mod plot;
 pub mod relative;
 
 pub use boxes::{BoxProvider, BoxesChoice, IndexedBoxes};
-pub use driver::{DepthChoice, EvalOptions, EvalReport, FitChoice, SeriesRow, evaluate, write_series};
+pub use driver::{DepthChoice, DepthSample, EvalOptions, EvalReport, FitChoice, SeriesRow, evaluate, write_series};
 pub use metrics::{DepthAccuracy, distance_correlation, quantile, rmse};
 pub use relative::RelativeGtParams;
 

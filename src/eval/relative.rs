@@ -83,6 +83,17 @@ pub fn relative_from_depth(p: &RelativeGtParams, depth: &DepthMap, frame: u32, o
     out.extend((0..w * h).map(|i| value(p, ph, key, depth.mm[i], (i % w, i / w), (w, h))));
 }
 
+/// The relative inverse depth at the pixel containing `px` (`None` outside or without depth).
+pub fn relative_at(p: &RelativeGtParams, depth: &DepthMap, frame: u32, px: Pixel) -> Option<f64> {
+    let (w, h) = (depth.width as usize, depth.height as usize);
+    if !px.is_finite() || px.u < 0.0 || px.v < 0.0 || px.u as usize >= w || px.v as usize >= h {
+        return None;
+    }
+    let (x, y) = (px.u as usize, px.v as usize);
+    let v = value(p, phase(p), frame_key(p, frame), depth.mm[y * w + x], (x, y), (w, h));
+    v.is_finite().then_some(f64::from(v))
+}
+
 /// Median of the relative inverse depth in the `(2r+1)^2` window around `px`, computed only there
 /// (identical to sampling [`relative_from_depth`]'s map with [`crate::metric::sample_median`]).
 pub fn sample_relative(p: &RelativeGtParams, depth: &DepthMap, frame: u32, px: Pixel, radius: usize) -> Option<f64> {

@@ -19,7 +19,7 @@ pub mod regressors;
 mod sample;
 
 pub use fit::{DepthModel, FitError, ReferencePair, References, ScaleShift, fit, fit_robust};
-pub use sample::{RelativeMap, sample_median};
+pub use sample::{RelativeMap, sample_box_quantile, sample_median};
 
 /// Most reference objects a scene may have (the paper uses ten).
 pub const MAX_REFERENCES: usize = 32;
