@@ -3,8 +3,10 @@
 use crate::eval::{
     BoxesChoice, DepthChoice, DepthSample, EvalOptions, EvalReport, FitChoice, evaluate, plot, write_series,
 };
-use crate::postprocess::PostprocessConfig;
+use crate::motion::SpeedMethod;
+use crate::postprocess::{BoxAnchor, PostprocessConfig};
 use crate::sequence::Sequence;
+use crate::units::MetresPerSecond;
 use crate::units::Seconds;
 use anyhow::Context;
 use std::path::PathBuf;
@@ -43,6 +45,21 @@ pub struct EvalArgs {
     /// (25% quantile over the central half of the box).
     #[arg(long, value_enum, default_value_t = DepthSample::Centre)]
     pub depth_sample: DepthSample,
+    /// Speed from the chord over the span (the paper, with span 0) or a least-squares regression.
+    #[arg(long, value_enum, default_value_t = SpeedMethod::Chord)]
+    pub speed_method: SpeedMethod,
+    /// Per-fish speeds above this (m/s) are glitches left out of the mean.
+    #[arg(long, default_value_t = 10.0)]
+    pub max_speed: f64,
+    /// Turn only the box-fluctuation detector (eq. 3) off.
+    #[arg(long)]
+    pub no_box_fluctuation: bool,
+    /// Turn only the depth-jump detector (eq. 4) off.
+    #[arg(long)]
+    pub no_depth_jump: bool,
+    /// What stays put when eq. 3 replaces a box dimension.
+    #[arg(long, value_enum, default_value_t = BoxAnchor::LeastMoved)]
+    pub box_anchor: BoxAnchor,
     /// relative-gt: foul this many reference objects (their relative depth reads 50% nearer).
     #[arg(long, default_value_t = 0)]
     pub foul_refs: usize,
@@ -108,6 +125,12 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         ..Default::default()
     };
     opts.motion.speed_span = Seconds(args.speed_span);
+    opts.motion.speed_method = args.speed_method;
+    opts.motion.max_speed = MetresPerSecond(args.max_speed);
+    opts.postprocess.box_anchor = args.box_anchor;
+    opts.postprocess.box_fluctuation &= !args.no_box_fluctuation;
+    opts.postprocess.depth_jump &= !args.no_depth_jump;
+    opts.motion.validate().map_err(|e| super::UsageError(e.into()))?;
     opts.relative.pixel_noise = args.rel_noise;
     opts.relative.low_freq = args.rel_distortion;
     opts.relative.seed = seq.meta.seed ^ 0x5eed;

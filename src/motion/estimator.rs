@@ -9,6 +9,45 @@ use heapless::Deque;
 /// Positions kept per track for the speed span.
 const POSITIONS: usize = 32;
 
+/// How a fish's speed is computed from its recent world positions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum SpeedMethod {
+    /// `|P_t - P_ref| / (t - t_ref)` with `P_ref` the oldest position within `speed_span` (at least
+    /// the previous one): with span 0 this is the paper's frame-to-frame speed.
+    #[default]
+    Chord,
+    /// Norm of the least-squares slope of position against time over the positions within
+    /// `speed_span` (at least 3 of them, else the chord): per-fish velocity noise falls with the
+    /// number of positions, and so does the upward bias that noise gives `|v|`.
+    Regression,
+}
+
+/// Least-squares velocity over the positions within `span` of `t`; `None` for fewer than 3.
+fn regression_speed(positions: &Deque<(f64, [f64; 3]), POSITIONS>, t: f64, span: f64) -> Option<f64> {
+    let inside = || positions.iter().filter(|p| t - p.0 <= span * (1.0 + 1e-6) + 1e-9);
+    let n = inside().count();
+    if n < 3 {
+        return None;
+    }
+    let tm = inside().map(|p| p.0).sum::<f64>() / n as f64;
+    let mut pm = [0.0; 3];
+    for p in inside() {
+        for k in 0..3 {
+            pm[k] += p.1[k] / n as f64;
+        }
+    }
+    let (mut stt, mut stp) = (0.0, [0.0; 3]);
+    for p in inside() {
+        let dt = p.0 - tm;
+        stt += dt * dt;
+        for k in 0..3 {
+            stp[k] += dt * (p.1[k] - pm[k]);
+        }
+    }
+    (stt > 0.0).then(|| (stp[0] * stp[0] + stp[1] * stp[1] + stp[2] * stp[2]).sqrt() / stt)
+}
+
 /// Motion settings (the `[motion]` config section).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -20,6 +59,8 @@ pub struct MotionConfig {
     /// Speed is taken over the oldest stored position at most this long ago (at least the previous
     /// one): 0 = frame to frame, as the paper. Longer spans trade lag for less noise.
     pub speed_span: Seconds,
+    /// Chord (the paper) or least-squares regression over the span.
+    pub speed_method: SpeedMethod,
     /// Time constant of the exponential smoothing of the activity index.
     pub smoothing: Seconds,
     /// A track not seen for this long is forgotten (its slot is reused).
@@ -34,6 +75,7 @@ impl Default for MotionConfig {
             max_tracks: 256,
             body_length: None,
             speed_span: Seconds(0.0),
+            speed_method: SpeedMethod::Chord,
             smoothing: Seconds(2.0),
             track_timeout: Seconds(1.0),
             max_speed: MetresPerSecond(10.0),
@@ -259,8 +301,14 @@ impl ActivityEstimator {
             let p = [world.0.x, world.0.y, world.0.z];
             let _ = s.positions.push_back((t.0, p));
             let Some((t0, p0)) = reference else { continue };
-            let dist = ((p[0] - p0[0]).powi(2) + (p[1] - p0[1]).powi(2) + (p[2] - p0[2]).powi(2)).sqrt();
-            let v = dist / (t.0 - t0);
+            let v = match self.motion.speed_method {
+                SpeedMethod::Regression => regression_speed(&s.positions, t.0, span),
+                SpeedMethod::Chord => None,
+            }
+            .unwrap_or_else(|| {
+                let dist = ((p[0] - p0[0]).powi(2) + (p[1] - p0[1]).powi(2) + (p[2] - p0[2]).powi(2)).sqrt();
+                dist / (t.0 - t0)
+            });
             if !v.is_finite() || v > self.motion.max_speed.0 {
                 out.skipped += 1;
                 continue;

@@ -13,5 +13,5 @@
 mod estimator;
 mod stats;
 
-pub use estimator::{ActivityEstimator, ActivitySample, MotionConfig, TrackObservation, TrackView};
+pub use estimator::{ActivityEstimator, ActivitySample, MotionConfig, SpeedMethod, TrackObservation, TrackView};
 pub use stats::{mean_ci95, student_t975};

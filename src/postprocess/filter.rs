@@ -1,6 +1,6 @@
 //! Per-track post-processing state: eq. 3 and eq. 4 detectors with their EWMA corrections.
 
-use super::{HISTORY, PostprocessConfig, ewma};
+use super::{BoxAnchor, HISTORY, PostprocessConfig, ewma};
 use crate::geometry::PixelBox;
 use crate::units::{Metres, Seconds};
 use heapless::Deque;
@@ -97,13 +97,22 @@ impl TrackFilter {
                     h = ewma(recent().map(|s| s.hc).collect::<heapless::Vec<f64, HISTORY>>().into_iter()).unwrap_or(h);
                     out.height_corrected = true;
                 }
-                // Rebuild around the edges that moved least since the previous raw box.
-                let x =
-                    if (raw.x - prev.x).abs() <= (raw.right() - prev.right()).abs() { raw.x } else { raw.right() - w };
-                let y = if (raw.y - prev.y).abs() <= (raw.bottom() - prev.bottom()).abs() {
-                    raw.y
-                } else {
-                    raw.bottom() - h
+                let (x, y) = match cfg.box_anchor {
+                    // Rebuild around the edges that moved least since the previous raw box.
+                    BoxAnchor::LeastMoved => (
+                        if (raw.x - prev.x).abs() <= (raw.right() - prev.right()).abs() {
+                            raw.x
+                        } else {
+                            raw.right() - w
+                        },
+                        if (raw.y - prev.y).abs() <= (raw.bottom() - prev.bottom()).abs() {
+                            raw.y
+                        } else {
+                            raw.bottom() - h
+                        },
+                    ),
+                    BoxAnchor::TopLeft => (raw.x, raw.y),
+                    BoxAnchor::Centre => (raw.center().u - 0.5 * w, raw.center().v - 0.5 * h),
                 };
                 out.bbox = PixelBox::new(x, y, w, h);
             }

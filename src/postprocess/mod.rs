@@ -25,6 +25,20 @@ use crate::units::{Metres, Seconds};
 /// Samples of history kept per track (covers a 1 s window up to 64 samples/s).
 pub const HISTORY: usize = 64;
 
+/// Which part of the detected box stays put when eq. 3 replaces its width or height.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum BoxAnchor {
+    /// The edge (per axis) that moved least since the previous frame (`design.md`).
+    #[default]
+    LeastMoved,
+    /// The top-left corner, as a literal reading of the paper ("update the dimensions, then compute
+    /// the centre").
+    TopLeft,
+    /// The detected centre: only the size is smoothed, the centre (and so the speed) is untouched.
+    Centre,
+}
+
 /// Post-processing settings (the `[postprocess]` config section).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -35,6 +49,8 @@ pub struct PostprocessConfig {
     pub fluctuation_window: Seconds,
     /// Window of previous sizes whose EWMA replaces an abnormal size (paper: 5 frames at 30 fps).
     pub box_ewma_window: Seconds,
+    /// What stays put when eq. 3 replaces a dimension.
+    pub box_anchor: BoxAnchor,
     /// Minimum number of past size changes before eq. 3 may fire (warm-up).
     pub fluctuation_min_history: usize,
     /// Switch for the depth-jump detector and its correction (eq. 4).
@@ -55,6 +71,7 @@ impl Default for PostprocessConfig {
             box_fluctuation: true,
             fluctuation_window: Seconds(30.0 / FPS),
             box_ewma_window: Seconds(5.0 / FPS),
+            box_anchor: BoxAnchor::LeastMoved,
             fluctuation_min_history: 3,
             depth_jump: true,
             depth_jump_threshold: Metres(0.6),
