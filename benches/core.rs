@@ -66,8 +66,8 @@ fn run(label: &str, n: u32, post: PostprocessConfig) {
 }
 
 fn main() {
-    run("postprocess + motion", 100, PostprocessConfig::default());
+    run("postprocess (eq. 3+4) + motion", 100, PostprocessConfig::paper());
     run("motion only (postprocess off)", 100, PostprocessConfig::off());
-    run("postprocess + motion", 20, PostprocessConfig::default());
-    run("postprocess + motion", 250, PostprocessConfig::default());
+    run("postprocess (eq. 3+4) + motion", 20, PostprocessConfig::paper());
+    run("postprocess (eq. 3+4) + motion", 250, PostprocessConfig::paper());
 }

@@ -34,7 +34,7 @@ fn steady_state_update_allocates_nothing() {
     let pose =
         Pose::look_at(WorldPoint::new(3.0, -0.5, 1.5), WorldPoint::new(3.0, 3.0, 1.2), nalgebra::Vector3::z()).unwrap();
     let cam = Camera { intrinsics: k, pose };
-    let mut est = ActivityEstimator::new(cam, MotionConfig::default(), PostprocessConfig::default());
+    let mut est = ActivityEstimator::new(cam, MotionConfig::default(), PostprocessConfig::paper());
     let mut obs: Vec<TrackObservation> = Vec::with_capacity(100);
     let frame = |i: usize, obs: &mut Vec<TrackObservation>| {
         obs.clear();

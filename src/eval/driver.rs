@@ -105,8 +105,11 @@ pub struct SeriesRow {
     pub frame: u32,
     /// Timestamp, seconds.
     pub t: f64,
-    /// Ground-truth swarm speed (mean over visible fish), m/s.
+    /// Ground-truth swarm speed (mean |v| over visible fish) at the time the estimate refers to
+    /// (`t - latency`, interpolated between frames), m/s.
     pub true_mps: Option<f64>,
+    /// The same for the run without post-processing.
+    pub true_raw_mps: Option<f64>,
     /// Estimated swarm speed (eq. 5) with post-processing as configured, m/s.
     pub est_mps: Option<f64>,
     /// Estimated swarm speed with post-processing off, m/s.
@@ -152,6 +155,8 @@ pub struct EvalReport {
     pub mean_est_mps: f64,
     /// Mean number of fish in the estimated mean.
     pub mean_fish: f64,
+    /// Mean latency of the estimate (the speeds refer to `t - latency`), seconds.
+    pub latency_s: f64,
     /// Depth RMSE at fish box centres (estimated depth only), metres.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_rmse_m: Option<f64>,
@@ -258,6 +263,7 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
     let (mut fit_failures, mut rejected, mut residual_sum, mut residual_n) = (0usize, 0u64, 0.0, 0usize);
     let (mut boxes_corrected, mut depths_corrected) = (0u64, 0u64);
     let mut series = Vec::with_capacity(seq.len() as usize);
+    let mut latencies = Vec::with_capacity(seq.len() as usize);
     let radius = opts.window_radius;
     for frame in 1..=seq.len() {
         let t = seq.timestamp(frame);
@@ -327,15 +333,39 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         let s_raw = est_raw.update_with(t, &obs, &depth_at);
         boxes_corrected += u64::from(s.boxes_corrected);
         depths_corrected += u64::from(s.depths_corrected);
-        let (ts, tn) = true_sum[frame as usize];
         series.push(SeriesRow {
             frame,
             t: t.0,
-            true_mps: (tn > 0).then(|| ts / tn as f64),
+            true_mps: None,
+            true_raw_mps: None,
             est_mps: s.mean.map(|m| m.0),
             est_raw_mps: s_raw.mean.map(|m| m.0),
             n_fish: s.n_fish,
         });
+        latencies.push((s.latency.0, s_raw.latency.0));
+    }
+    // Truth at the time each estimate refers to (`ActivitySample::latency`), interpolated between frames.
+    let truth_frame: Vec<Option<f64>> = true_sum.iter().map(|&(ts, tn)| (tn > 0).then(|| ts / tn as f64)).collect();
+    let fps = seq.meta.fps;
+    let truth_at = |tq: f64| -> Option<f64> {
+        let pos = tq * fps + 1.0;
+        let f0 = pos.floor();
+        if f0.is_nan() || f0 < 1.0 {
+            return None;
+        }
+        let w = pos - f0;
+        let a = truth_frame.get(f0 as usize).copied().flatten();
+        let b = truth_frame.get(f0 as usize + 1).copied().flatten();
+        match (a, b) {
+            (Some(a), Some(b)) => Some(a + w * (b - a)),
+            (Some(a), None) if w < 0.5 => Some(a),
+            (None, Some(b)) if w >= 0.5 => Some(b),
+            _ => None,
+        }
+    };
+    for (r, &(lat, lat_raw)) in series.iter_mut().zip(&latencies) {
+        r.true_mps = if r.est_mps.is_some() { truth_at(r.t - lat) } else { truth_frame[r.frame as usize] };
+        r.true_raw_mps = if r.est_raw_mps.is_some() { truth_at(r.t - lat_raw) } else { truth_frame[r.frame as usize] };
     }
     let scored: Vec<&SeriesRow> = series.iter().filter(|r| r.true_mps.is_some() && r.est_mps.is_some()).collect();
     if scored.len() < 2 {
@@ -350,7 +380,7 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
     let truth: Vec<f64> = scored.iter().filter_map(|r| r.true_mps).collect();
     let est_v: Vec<f64> = scored.iter().filter_map(|r| r.est_mps).collect();
     let raw_pairs: Vec<(f64, f64)> =
-        series.iter().filter_map(|r| Some((r.est_raw_mps?, r.true_mps?))).collect::<Vec<_>>();
+        series.iter().filter_map(|r| Some((r.est_raw_mps?, r.true_raw_mps?))).collect::<Vec<_>>();
     let (raw_e, raw_t): (Vec<f64>, Vec<f64>) = raw_pairs.into_iter().unzip();
     let errors: Vec<f64> = est_v.iter().zip(&truth).map(|(e, t)| e - t).collect();
     let n = scored.len() as f64;
@@ -372,6 +402,7 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         mean_true_mps: truth.iter().sum::<f64>() / n,
         mean_est_mps: est_v.iter().sum::<f64>() / n,
         mean_fish: scored.iter().map(|r| r.n_fish as f64).sum::<f64>() / n,
+        latency_s: latencies.iter().map(|l| l.0).sum::<f64>() / latencies.len().max(1) as f64,
         depth_rmse_m: depth_acc.rmse(),
         depth_delta_1_25: depth_acc.delta_1_25(),
         depth_delta_1_25_2: depth_acc.delta_1_25_2(),

@@ -172,7 +172,7 @@ mod tests {
 
     #[test]
     fn steady_size_changes_pass_and_a_tail_flick_is_corrected() {
-        let cfg = PostprocessConfig::default();
+        let cfg = PostprocessConfig::paper();
         let mut f = TrackFilter::new();
         // A fish swimming right at constant size, with a width jitter of +-0.5 px.
         let mut fired = 0;
@@ -203,7 +203,7 @@ mod tests {
 
     #[test]
     fn box_detector_needs_history_and_resets_after_a_gap() {
-        let cfg = PostprocessConfig::default();
+        let cfg = PostprocessConfig::paper();
         let mut f = TrackFilter::new();
         let b = |w: f64| PixelBox::new(0.0, 0.0, w, 10.0);
         assert!(!f.correct_box(&cfg, Seconds(0.0), b(10.0)).width_corrected);
