@@ -436,6 +436,27 @@ mod tests {
     }
 
     #[test]
+    fn chord_and_regression_over_a_span_report_their_latency() {
+        let cam = camera();
+        for method in [SpeedMethod::Chord, SpeedMethod::Regression] {
+            let cfg = MotionConfig { speed_span: Seconds(0.5), speed_method: method, ..Default::default() };
+            let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::off());
+            let mut s = ActivitySample::default();
+            for i in 0..40 {
+                let t = i as f64 / 30.0;
+                // Accelerating along x: v(t) = 0.2 + 0.6 t.
+                let x = 0.2 * t + 0.3 * t * t;
+                s = est.update(Seconds(t), &[observe(&cam, 1, WorldPoint::new(x, 1.0, 1.5))]);
+            }
+            let t = 39.0 / 30.0;
+            // Both estimate the speed at the window's middle, t - 0.25 s.
+            assert!((s.latency.0 - 0.25).abs() < 1e-9, "{method:?} {s:?}");
+            let v_mid = 0.2 + 0.6 * (t - 0.25);
+            assert!((s.mean.unwrap().0 - v_mid).abs() < 1e-6, "{method:?}: {} vs {v_mid}", s.mean.unwrap().0);
+        }
+    }
+
+    #[test]
     fn bad_observations_are_skipped_not_propagated() {
         let cam = camera();
         let mut est =
