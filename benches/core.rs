@@ -67,6 +67,7 @@ fn run(label: &str, n: u32, post: PostprocessConfig) {
 
 fn main() {
     run("postprocess (eq. 3+4) + motion", 100, PostprocessConfig::paper());
+    run("postprocess (default: eq. 4) + motion", 100, PostprocessConfig::default());
     run("motion only (postprocess off)", 100, PostprocessConfig::off());
     run("postprocess (eq. 3+4) + motion", 20, PostprocessConfig::paper());
     run("postprocess (eq. 3+4) + motion", 250, PostprocessConfig::paper());
