@@ -56,7 +56,7 @@ pub fn plot_series(path: &Path, report: &EvalReport) -> Result<(), EvalError> {
     chart
         .draw_series(LineSeries::new(line(|r| r.true_mps), BLACK.stroke_width(2)))
         .map_err(|e| err(e.to_string()))?
-        .label("ground truth")
+        .label(format!("ground truth at t - {:.2} s (estimate latency)", report.latency_s))
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
     chart
         .draw_series(LineSeries::new(line(|r| r.est_mps), BLUE.stroke_width(2)))
