@@ -66,6 +66,12 @@ fn run(label: &str, n: u32, post: PostprocessConfig) {
 }
 
 fn main() {
+    // `cargo test --all-targets` (make test) also runs harness-less benches: only measure under
+    // `cargo bench`, which passes `--bench`.
+    if !std::env::args().any(|a| a == "--bench") {
+        println!("core benchmark: run it with `cargo bench --bench core` (make bench-core)");
+        return;
+    }
     run("postprocess (eq. 3+4) + motion", 100, PostprocessConfig::paper());
     run("postprocess (default: eq. 4) + motion", 100, PostprocessConfig::default());
     run("motion only (postprocess off)", 100, PostprocessConfig::off());
