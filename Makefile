@@ -6,6 +6,7 @@ BIN := target/release/fme
 DEMO_OUT ?= target/demo
 
 .PHONY: all setup build test lint fmt clippy demo bench bench-synth clean
+.PHONY: all setup build test lint fmt clippy demo bench bench-core clean
 
 all: build
 
@@ -37,6 +38,9 @@ bench: build
 
 bench-synth: setup
 	$(CARGO) bench --locked --bench synth
+# Per-frame cost of post-processing + motion (issue 3); a benchmark, not a test.
+bench-core:
+	$(CARGO) bench --locked --bench core
 
 clean:
 	$(CARGO) clean

@@ -1,1 +1,50 @@
-//! Evaluation against ground truth: speed RMSE, distance correlation, depth metrics, plots.
+//! Evaluation against ground truth (paper section 4.5): speed RMSE, Szekely's distance correlation,
+//! the error interval, depth accuracy at fish centres, plots and per-frame series, and the driver
+//! behind `fme eval`.
+//!
+//! The driver runs the same [`crate::motion::ActivityEstimator`] the daemon runs, frame by frame,
+//! twice: with the configured post-processing and with it off (`speed_rmse_raw_mps`), so every
+//! report shows what eq. 3-4 buy.
+
+mod boxes;
+mod driver;
+pub mod metrics;
+pub mod plot;
+pub mod relative;
+
+pub use boxes::{BoxProvider, BoxesChoice, IndexedBoxes};
+pub use driver::{DepthChoice, DepthSample, EvalOptions, EvalReport, FitChoice, SeriesRow, evaluate, write_series};
+pub use metrics::{DepthAccuracy, distance_correlation, quantile, rmse};
+pub use relative::RelativeGtParams;
+
+use std::path::PathBuf;
+
+/// Errors of the evaluation; each names the file (and line, through the sequence reader's errors).
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    /// The sequence or a box file could not be read or parsed.
+    #[error(transparent)]
+    Sequence(#[from] crate::sequence::Error),
+    /// An input that parses but cannot be used.
+    #[error("{path}: {msg}")]
+    Input {
+        /// The file at fault.
+        path: PathBuf,
+        /// What is wrong.
+        msg: String,
+    },
+    /// An option whose implementation comes with a later issue.
+    #[error("{0} is not available yet")]
+    NotAvailable(&'static str),
+    /// Writing an output (series, plot) failed.
+    #[error("{path}: {msg}")]
+    Output {
+        /// The file being written.
+        path: PathBuf,
+        /// What went wrong.
+        msg: String,
+    },
+    /// Nothing to score (no frame has both a true and an estimated swarm speed).
+    #[error("{0}")]
+    NothingToScore(String),
+}

@@ -1,1 +1,25 @@
 //! Metric depth from relative inverse depth using reference objects (paper eq. 1-2).
+//!
+//! A monocular depth network returns a relative inverse depth map `R` with unknown scale and shift.
+//! Reference objects with known world positions are projected into the image, `R` is sampled there
+//! with a small median window ([`sample_median`]), and a scale/shift model is fitted against the
+//! references' known depths ([`fit`]):
+//! - [`DepthModel::Linear`]: the paper's eq. 2, `D = s*R + t`;
+//! - [`DepthModel::Inverse`]: the physically consistent `1/D = s*R + t` (MiDaS alignment);
+//! - [`fit_robust`]: either model fitted by exhaustive-pair RANSAC then least squares on the inliers,
+//!   which survives one or two fouled or hidden references.
+//!
+//! The paper's other regressors (2nd-order polynomial, decision tree, k-nearest neighbours, Table 4)
+//! live in [`regressors`] and are for the evaluation table only.
+//!
+//! Nothing here allocates: references are held in a fixed-capacity list of [`MAX_REFERENCES`].
+
+mod fit;
+pub mod regressors;
+mod sample;
+
+pub use fit::{DepthModel, FitError, ReferencePair, References, ScaleShift, fit, fit_robust};
+pub use sample::{RelativeMap, sample_box_quantile, sample_median};
+
+/// Most reference objects a scene may have (the paper uses ten).
+pub const MAX_REFERENCES: usize = 32;

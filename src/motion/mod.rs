@@ -1,1 +1,17 @@
-//! World positions, per-fish 3D speed and the swarm activity index (paper sec. 3.3, eq. 5).
+//! World positions, per-fish 3D speed and the swarm activity index (paper section 3.3, eq. 5).
+//!
+//! [`ActivityEstimator`] is the per-frame API the daemon and `fme eval` call: give it the frame's
+//! timestamp and the tracked boxes (with depth, or a function that samples depth at the corrected box
+//! centre) and it returns an [`ActivitySample`]: the swarm's mean 3D speed (eq. 5), the number of
+//! fish, a 95% interval of the mean, an EWMA-smoothed value and the mean speed in body lengths/s.
+//!
+//! Per track it runs the post-processing of [`crate::postprocess`], lifts the corrected box centre
+//! with the corrected depth into the world frame through [`crate::geometry::Camera`], and computes
+//! `v = |P_t - P_ref| / (t - t_ref)` from real timestamps. All per-track state is fixed-size and the
+//! track table is allocated once, at construction: steady-state updates never touch the heap.
+
+mod estimator;
+mod stats;
+
+pub use estimator::{ActivityEstimator, ActivitySample, MotionConfig, SpeedMethod, TrackObservation, TrackView};
+pub use stats::{mean_ci95, student_t975};

@@ -1,0 +1,104 @@
+//! Where `fme eval` gets its tracked boxes from. The tracker and the detector model plug in by
+//! implementing [`BoxProvider`].
+
+use super::EvalError;
+use crate::geometry::PixelBox;
+use crate::sequence::{Sequence, read_mot};
+use std::path::{Path, PathBuf};
+
+/// A source of tracked boxes, frame by frame (frames are 1-based and requested in order).
+pub trait BoxProvider {
+    /// Short name for reports (`gt`, a file name, `tracker`).
+    fn name(&self) -> String;
+    /// Clears `out` and fills it with `(track id, box)` for `frame`.
+    fn frame_boxes(&mut self, frame: u32, out: &mut Vec<(u32, PixelBox)>) -> Result<(), EvalError>;
+}
+
+/// Boxes indexed by frame, loaded up front.
+#[derive(Debug, Clone)]
+pub struct IndexedBoxes {
+    name: String,
+    by_frame: Vec<Vec<(u32, PixelBox)>>,
+}
+
+impl IndexedBoxes {
+    /// The ground-truth boxes of `gt/gt.txt` with their ids (the paper's GTBBox).
+    pub fn ground_truth(seq: &Sequence) -> Self {
+        let mut by_frame = vec![Vec::new(); seq.len() as usize + 1];
+        for r in &seq.gt {
+            if let Some(f) = by_frame.get_mut(r.frame as usize) {
+                f.push((r.id, r.bbox));
+            }
+        }
+        Self { name: "gt".into(), by_frame }
+    }
+
+    /// MOTChallenge tracks from a file (`frame,id,x,y,w,h,...`); rows with id -1 (untracked
+    /// detections) are ignored; a frame beyond the sequence is an error naming the file.
+    pub fn from_mot_file(path: &Path, frames: u32) -> Result<Self, EvalError> {
+        let rows = read_mot(path)?;
+        let mut by_frame = vec![Vec::new(); frames as usize + 1];
+        for r in rows {
+            if r.frame > frames {
+                return Err(EvalError::Input {
+                    path: path.to_path_buf(),
+                    msg: format!("frame {} is beyond the sequence's {frames} frames", r.frame),
+                });
+            }
+            if r.id >= 0 && r.id <= i64::from(u32::MAX) {
+                by_frame[r.frame as usize].push((r.id as u32, r.bbox));
+            }
+        }
+        Ok(Self { name: path.display().to_string(), by_frame })
+    }
+}
+
+impl BoxProvider for IndexedBoxes {
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+    fn frame_boxes(&mut self, frame: u32, out: &mut Vec<(u32, PixelBox)>) -> Result<(), EvalError> {
+        out.clear();
+        if let Some(b) = self.by_frame.get(frame as usize) {
+            out.extend_from_slice(b);
+        }
+        Ok(())
+    }
+}
+
+/// The `--boxes` choice.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum BoxesChoice {
+    /// `gt/gt.txt`.
+    Gt,
+    /// fme's tracker on the sequence's detections (comes with the tracker issue).
+    Tracker,
+    /// The bundled detector + tracker on the frames (comes with the inference issue).
+    Model,
+    /// A MOTChallenge track file.
+    File(PathBuf),
+}
+
+impl std::str::FromStr for BoxesChoice {
+    type Err = std::convert::Infallible;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Ok(match s {
+            "gt" => Self::Gt,
+            "tracker" => Self::Tracker,
+            "model" => Self::Model,
+            other => Self::File(PathBuf::from(other)),
+        })
+    }
+}
+
+impl BoxesChoice {
+    /// Builds the provider; `tracker` and `model` are not available yet and say so.
+    pub fn provider(&self, seq: &Sequence) -> Result<Box<dyn BoxProvider>, EvalError> {
+        match self {
+            Self::Gt => Ok(Box::new(IndexedBoxes::ground_truth(seq))),
+            Self::File(p) => Ok(Box::new(IndexedBoxes::from_mot_file(p, seq.len())?)),
+            Self::Tracker => Err(EvalError::NotAvailable("--boxes tracker (fme's tracker is not wired into eval yet)")),
+            Self::Model => Err(EvalError::NotAvailable("--boxes model (the detector is not wired into eval yet)")),
+        }
+    }
+}

@@ -1,0 +1,430 @@
+//! The evaluation driver: run the estimator over a sequence and score it against ground truth.
+
+use super::metrics::{DepthAccuracy, bias, distance_correlation, quantile, rmse};
+use super::relative::{RelativeGtParams, relative_at, sample_relative};
+use super::{BoxesChoice, EvalError};
+use crate::geometry::{Pixel, PixelBox};
+use crate::metric::regressors::{Regressor, RegressorKind};
+use crate::metric::{
+    DepthModel, ReferencePair, References, RelativeMap, ScaleShift, fit, fit_robust, sample_box_quantile, sample_median,
+};
+use crate::motion::{ActivityEstimator, MotionConfig, TrackObservation};
+use crate::postprocess::PostprocessConfig;
+use crate::sequence::{DepthMap, Sequence};
+use crate::units::Metres;
+use std::io::Write;
+use std::path::Path;
+
+/// The `--depth` choice.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DepthChoice {
+    /// Ground-truth depth maps from `depth/` (the paper's GTDepth).
+    Gt,
+    /// The depth network (comes with the inference issue).
+    Model,
+    /// Ground-truth depth turned into noisy relative inverse depth, then the metric fit (eq. 1-2).
+    RelativeGt,
+}
+
+/// The `--fit` choice (used with estimated depth).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FitChoice {
+    /// The paper's eq. 2, `D = s*R + t`.
+    Linear,
+    /// `1/D = s*R + t`.
+    Inverse,
+    /// The inverse model fitted by exhaustive-pair RANSAC (survives fouled references).
+    Robust,
+    /// 2nd-order polynomial in R (Table 4).
+    Poly2,
+    /// Regression tree (Table 4).
+    Tree,
+    /// k-nearest neighbours (Table 4).
+    Knn,
+}
+
+/// How a fish's depth is read from the depth map (`--depth-sample`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DepthSample {
+    /// Median of a 5x5 window at the (corrected) box centre: the paper's "depth at the centre point".
+    Centre,
+    /// 25% quantile of depth over the central half of the box (nearest quarter: the fish, not the
+    /// wall behind a thin or bent fish).
+    Box,
+}
+
+/// Everything `fme eval` can vary.
+#[derive(Debug, Clone)]
+pub struct EvalOptions {
+    /// Box source.
+    pub boxes: BoxesChoice,
+    /// Depth source.
+    pub depth: DepthChoice,
+    /// Metric fit for estimated depth.
+    pub fit: FitChoice,
+    /// Post-processing of the main run (the raw run always has it off).
+    pub postprocess: PostprocessConfig,
+    /// Motion settings.
+    pub motion: MotionConfig,
+    /// Synthetic relative depth settings for `relative-gt`.
+    pub relative: RelativeGtParams,
+    /// Number of reference objects to foul in `relative-gt` (their R is made to look 50% nearer).
+    pub foul_refs: usize,
+    /// Radius of the median window used to sample depth maps (2 = 5x5).
+    pub window_radius: usize,
+    /// Inlier tolerance of the robust fit: max(absolute, relative * depth).
+    pub robust_inlier: (Metres, f64),
+    /// How fish depth is sampled.
+    pub depth_sample: DepthSample,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        Self {
+            boxes: BoxesChoice::Gt,
+            depth: DepthChoice::Gt,
+            fit: FitChoice::Linear,
+            postprocess: PostprocessConfig::default(),
+            motion: MotionConfig::default(),
+            relative: RelativeGtParams::default(),
+            foul_refs: 0,
+            window_radius: 2,
+            robust_inlier: (Metres(0.1), 0.05),
+            depth_sample: DepthSample::Centre,
+        }
+    }
+}
+
+/// One frame of the series behind the plots (`--series`).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct SeriesRow {
+    /// 1-based frame number.
+    pub frame: u32,
+    /// Timestamp, seconds.
+    pub t: f64,
+    /// Ground-truth swarm speed (mean |v| over visible fish) at the time the estimate refers to
+    /// (`t - latency`, interpolated between frames), m/s.
+    pub true_mps: Option<f64>,
+    /// The same for the run without post-processing.
+    pub true_raw_mps: Option<f64>,
+    /// Estimated swarm speed (eq. 5) with post-processing as configured, m/s.
+    pub est_mps: Option<f64>,
+    /// Estimated swarm speed with post-processing off, m/s.
+    pub est_raw_mps: Option<f64>,
+    /// Fish in the estimated mean.
+    pub n_fish: usize,
+}
+
+/// The scores of one evaluation (`--json` prints this).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct EvalReport {
+    /// Sequence folder.
+    pub sequence: String,
+    /// Box source.
+    pub boxes: String,
+    /// Depth source.
+    pub depth: DepthChoice,
+    /// Metric fit (meaningful with estimated depth).
+    pub fit: Option<FitChoice>,
+    /// Post-processing on in the main run.
+    pub postprocess: bool,
+    /// How fish depth was sampled.
+    pub depth_sample: DepthSample,
+    /// Speed span, seconds (0 = frame to frame).
+    pub speed_span_s: f64,
+    /// Frames with both a true and an estimated swarm speed (the scored frames).
+    pub frames: usize,
+    /// RMSE of the estimated swarm speed, m/s.
+    pub speed_rmse_mps: f64,
+    /// Distance correlation of estimated and true swarm speed.
+    pub speed_distcorr: f64,
+    /// 2.5% and 97.5% quantiles of the per-frame error (estimated - true), m/s.
+    pub error_ci95_mps: [f64; 2],
+    /// Mean error (estimated - true), m/s.
+    pub speed_bias_mps: f64,
+    /// RMSE with post-processing off, m/s.
+    pub speed_rmse_raw_mps: f64,
+    /// Distance correlation with post-processing off.
+    pub speed_distcorr_raw: f64,
+    /// Mean true swarm speed over the scored frames, m/s.
+    pub mean_true_mps: f64,
+    /// Mean estimated swarm speed over the scored frames, m/s.
+    pub mean_est_mps: f64,
+    /// Mean number of fish in the estimated mean.
+    pub mean_fish: f64,
+    /// Mean latency of the estimate (the speeds refer to `t - latency`), seconds.
+    pub latency_s: f64,
+    /// Depth RMSE at fish box centres (estimated depth only), metres.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_rmse_m: Option<f64>,
+    /// Fraction of fish centres with max(est/true, true/est) < 1.25.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_delta_1_25: Option<f64>,
+    /// Same with 1.25^2.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_delta_1_25_2: Option<f64>,
+    /// Mean residual of the per-frame metric fits at the references, metres.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit_residual_m: Option<f64>,
+    /// Frames whose fit failed (the previous fit was kept).
+    pub fit_failures: usize,
+    /// References visible in the image (used by the fits).
+    pub references_visible: usize,
+    /// Total reference rejections by the robust fit over all frames.
+    pub references_rejected: u64,
+    /// Box corrections by eq. 3 in the main run.
+    pub boxes_corrected: u64,
+    /// Depth corrections by eq. 4 in the main run.
+    pub depths_corrected: u64,
+    /// Per-frame series (written by `--series`, not part of the JSON).
+    #[serde(skip)]
+    pub series: Vec<SeriesRow>,
+}
+
+enum Fitted {
+    Ss(ScaleShift),
+    Reg(Box<Regressor>),
+}
+
+impl Fitted {
+    fn depth(&self, r: f64) -> Option<Metres> {
+        match self {
+            Self::Ss(f) => f.depth(r),
+            Self::Reg(g) => g.depth(r),
+        }
+    }
+}
+
+fn fit_frame(opts: &EvalOptions, refs: &References) -> Result<Fitted, crate::metric::FitError> {
+    Ok(match opts.fit {
+        FitChoice::Linear => Fitted::Ss(fit(DepthModel::Linear, refs)?),
+        FitChoice::Inverse => Fitted::Ss(fit(DepthModel::Inverse, refs)?),
+        FitChoice::Robust => {
+            Fitted::Ss(fit_robust(DepthModel::Inverse, refs, opts.robust_inlier.0, opts.robust_inlier.1)?)
+        }
+        FitChoice::Poly2 => Fitted::Reg(Box::new(Regressor::fit(RegressorKind::Poly2, refs)?)),
+        FitChoice::Tree => Fitted::Reg(Box::new(Regressor::fit(RegressorKind::Tree, refs)?)),
+        FitChoice::Knn => Fitted::Reg(Box::new(Regressor::fit(RegressorKind::Knn, refs)?)),
+    })
+}
+
+fn to_metres(depth: &DepthMap, out: &mut Vec<f32>) {
+    out.clear();
+    out.extend(depth.mm.iter().map(|&mm| if mm == 0 { f32::NAN } else { f32::from(mm) / 1000.0 }));
+}
+
+/// Runs the evaluation. Reads frames' depth maps one at a time; memory is O(frames + pixels).
+pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalError> {
+    if opts.depth == DepthChoice::Model {
+        return Err(EvalError::NotAvailable("--depth model (the depth network is not wired into eval yet)"));
+    }
+    let mut provider = opts.boxes.provider(seq)?;
+    if !seq.has_depth {
+        return Err(EvalError::Input {
+            path: seq.dir.join("depth"),
+            msg: "missing: --depth gt and relative-gt need the ground-truth depth maps".into(),
+        });
+    }
+    let estimated = opts.depth == DepthChoice::RelativeGt;
+    let (w, h) = (seq.meta.width as usize, seq.meta.height as usize);
+    // Reference points: projected once (the camera is fixed); hidden ones are left out.
+    let ref_px: Vec<(Pixel, Metres)> = seq
+        .meta
+        .reference_objects
+        .iter()
+        .filter_map(|r| {
+            let p = r.front_face_center();
+            let px = seq.camera.world_to_pixel(&p).ok()?;
+            let inside = px.u >= 0.0 && px.v >= 0.0 && px.u < w as f64 && px.v < h as f64;
+            inside.then(|| (px, seq.camera.pose.to_camera(&p).depth()))
+        })
+        .collect();
+    // True swarm speed per frame: mean |v| of the fish visible in it.
+    let mut true_sum = vec![(0.0f64, 0usize); seq.len() as usize + 1];
+    for r in &seq.world {
+        if r.visibility > 0.0
+            && r.velocity.iter().all(|v| v.is_finite())
+            && let Some(s) = true_sum.get_mut(r.frame as usize)
+        {
+            s.0 += r.velocity.norm();
+            s.1 += 1;
+        }
+    }
+    let mut est = ActivityEstimator::new(seq.camera, opts.motion, opts.postprocess);
+    let mut est_raw = ActivityEstimator::new(seq.camera, opts.motion, PostprocessConfig::off());
+    let mut boxes: Vec<(u32, PixelBox)> = Vec::new();
+    let mut obs: Vec<TrackObservation> = Vec::new();
+    let mut gt_map = Vec::new();
+    let mut depth_acc = DepthAccuracy::default();
+    let mut last_fit: Option<Fitted> = None;
+    let (mut fit_failures, mut rejected, mut residual_sum, mut residual_n) = (0usize, 0u64, 0.0, 0usize);
+    let (mut boxes_corrected, mut depths_corrected) = (0u64, 0u64);
+    let mut series = Vec::with_capacity(seq.len() as usize);
+    let mut latencies = Vec::with_capacity(seq.len() as usize);
+    let radius = opts.window_radius;
+    for frame in 1..=seq.len() {
+        let t = seq.timestamp(frame);
+        provider.frame_boxes(frame, &mut boxes)?;
+        let dm = seq.read_depth(frame)?;
+        if (dm.width as usize, dm.height as usize) != (w, h) {
+            return Err(EvalError::Input {
+                path: seq.depth_path(frame),
+                msg: format!("depth map is {}x{}, the sequence is {w}x{h}", dm.width, dm.height),
+            });
+        }
+        to_metres(&dm, &mut gt_map);
+        let gt = RelativeMap { data: &gt_map, width: w, height: h };
+        if estimated {
+            let mut refs = References::new();
+            for (i, (px, d)) in ref_px.iter().enumerate() {
+                if let Some(mut r) = sample_relative(&opts.relative, &dm, frame, *px, radius) {
+                    if i < opts.foul_refs {
+                        r *= 1.5;
+                    }
+                    let _ = refs.push(ReferencePair { relative: r, depth: *d });
+                }
+            }
+            match fit_frame(opts, &refs) {
+                Ok(f) => {
+                    if let Fitted::Ss(s) = &f {
+                        residual_sum += s.residual_rms.0;
+                        residual_n += 1;
+                        rejected += u64::from(s.rejected.count_ones());
+                    }
+                    last_fit = Some(f);
+                }
+                Err(_) => fit_failures += 1,
+            }
+        }
+        let depth_at = |o: &TrackObservation, px: Pixel| -> Option<Metres> {
+            let fitted = |r: f64| last_fit.as_ref()?.depth(r);
+            match (estimated, opts.depth_sample) {
+                (true, DepthSample::Centre) => fitted(sample_relative(&opts.relative, &dm, frame, px, radius)?),
+                (false, DepthSample::Centre) => sample_median(&gt, px, radius, |_| true).map(Metres),
+                (est, DepthSample::Box) => {
+                    let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
+                    if est {
+                        // Larger relative inverse depth is nearer: the 75% quantile of R.
+                        fitted(sample_box_quantile(&b, 0.5, 0.75, |p| relative_at(&opts.relative, &dm, frame, p))?)
+                    } else {
+                        sample_box_quantile(&b, 0.5, 0.25, |p| gt.at(p)).map(Metres)
+                    }
+                }
+            }
+        };
+        obs.clear();
+        obs.extend(boxes.iter().map(|&(id, bbox)| TrackObservation { id, bbox, depth: None }));
+        if estimated {
+            for o in &obs {
+                let c = o.bbox.center();
+                let g = match opts.depth_sample {
+                    DepthSample::Centre => sample_median(&gt, c, radius, |_| true),
+                    DepthSample::Box => sample_box_quantile(&o.bbox, 0.5, 0.25, |p| gt.at(p)),
+                };
+                if let (Some(e), Some(g)) = (depth_at(o, c), g) {
+                    depth_acc.add(e.0, g);
+                }
+            }
+        }
+        let s = est.update_with(t, &obs, &depth_at);
+        let s_raw = est_raw.update_with(t, &obs, &depth_at);
+        boxes_corrected += u64::from(s.boxes_corrected);
+        depths_corrected += u64::from(s.depths_corrected);
+        series.push(SeriesRow {
+            frame,
+            t: t.0,
+            true_mps: None,
+            true_raw_mps: None,
+            est_mps: s.mean.map(|m| m.0),
+            est_raw_mps: s_raw.mean.map(|m| m.0),
+            n_fish: s.n_fish,
+        });
+        latencies.push((s.latency.0, s_raw.latency.0));
+    }
+    // Truth at the time each estimate refers to (`ActivitySample::latency`), interpolated between frames.
+    let truth_frame: Vec<Option<f64>> = true_sum.iter().map(|&(ts, tn)| (tn > 0).then(|| ts / tn as f64)).collect();
+    let fps = seq.meta.fps;
+    let truth_at = |tq: f64| -> Option<f64> {
+        let pos = tq * fps + 1.0;
+        let f0 = pos.floor();
+        if f0.is_nan() || f0 < 1.0 {
+            return None;
+        }
+        let w = pos - f0;
+        let a = truth_frame.get(f0 as usize).copied().flatten();
+        let b = truth_frame.get(f0 as usize + 1).copied().flatten();
+        match (a, b) {
+            (Some(a), Some(b)) => Some(a + w * (b - a)),
+            (Some(a), None) if w < 0.5 => Some(a),
+            (None, Some(b)) if w >= 0.5 => Some(b),
+            _ => None,
+        }
+    };
+    for (r, &(lat, lat_raw)) in series.iter_mut().zip(&latencies) {
+        r.true_mps = if r.est_mps.is_some() { truth_at(r.t - lat) } else { truth_frame[r.frame as usize] };
+        r.true_raw_mps = if r.est_raw_mps.is_some() { truth_at(r.t - lat_raw) } else { truth_frame[r.frame as usize] };
+    }
+    let scored: Vec<&SeriesRow> = series.iter().filter(|r| r.true_mps.is_some() && r.est_mps.is_some()).collect();
+    if scored.len() < 2 {
+        return Err(EvalError::NothingToScore(format!(
+            "{}: only {} frame(s) have both a true and an estimated swarm speed (boxes from {}, {} boxes in total)",
+            seq.dir.display(),
+            scored.len(),
+            provider.name(),
+            seq.gt.len()
+        )));
+    }
+    let truth: Vec<f64> = scored.iter().filter_map(|r| r.true_mps).collect();
+    let est_v: Vec<f64> = scored.iter().filter_map(|r| r.est_mps).collect();
+    let raw_pairs: Vec<(f64, f64)> =
+        series.iter().filter_map(|r| Some((r.est_raw_mps?, r.true_raw_mps?))).collect::<Vec<_>>();
+    let (raw_e, raw_t): (Vec<f64>, Vec<f64>) = raw_pairs.into_iter().unzip();
+    let errors: Vec<f64> = est_v.iter().zip(&truth).map(|(e, t)| e - t).collect();
+    let n = scored.len() as f64;
+    Ok(EvalReport {
+        sequence: seq.dir.display().to_string(),
+        boxes: provider.name(),
+        depth: opts.depth,
+        fit: estimated.then_some(opts.fit),
+        postprocess: opts.postprocess.box_fluctuation || opts.postprocess.depth_jump,
+        depth_sample: opts.depth_sample,
+        speed_span_s: opts.motion.speed_span.0,
+        frames: scored.len(),
+        speed_rmse_mps: rmse(&est_v, &truth).unwrap_or(f64::NAN),
+        speed_distcorr: distance_correlation(&est_v, &truth).unwrap_or(0.0),
+        error_ci95_mps: [quantile(&errors, 0.025).unwrap_or(0.0), quantile(&errors, 0.975).unwrap_or(0.0)],
+        speed_bias_mps: bias(&est_v, &truth).unwrap_or(0.0),
+        speed_rmse_raw_mps: rmse(&raw_e, &raw_t).unwrap_or(f64::NAN),
+        speed_distcorr_raw: distance_correlation(&raw_e, &raw_t).unwrap_or(0.0),
+        mean_true_mps: truth.iter().sum::<f64>() / n,
+        mean_est_mps: est_v.iter().sum::<f64>() / n,
+        mean_fish: scored.iter().map(|r| r.n_fish as f64).sum::<f64>() / n,
+        latency_s: latencies.iter().map(|l| l.0).sum::<f64>() / latencies.len().max(1) as f64,
+        depth_rmse_m: depth_acc.rmse(),
+        depth_delta_1_25: depth_acc.delta_1_25(),
+        depth_delta_1_25_2: depth_acc.delta_1_25_2(),
+        fit_residual_m: (residual_n > 0).then(|| residual_sum / residual_n as f64),
+        fit_failures,
+        references_visible: ref_px.len(),
+        references_rejected: rejected,
+        boxes_corrected,
+        depths_corrected,
+        series,
+    })
+}
+
+/// Writes the per-frame series as CSV with header `frame,t,true_mps,est_mps,n_fish` (empty field
+/// where a value is missing).
+pub fn write_series(path: &Path, series: &[SeriesRow]) -> Result<(), EvalError> {
+    let err = |e: std::io::Error| EvalError::Output { path: path.to_path_buf(), msg: e.to_string() };
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path).map_err(err)?);
+    let opt = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x}"));
+    writeln!(out, "frame,t,true_mps,est_mps,n_fish").map_err(err)?;
+    for r in series {
+        writeln!(out, "{},{},{},{},{}", r.frame, r.t, opt(r.true_mps), opt(r.est_mps), r.n_fish).map_err(err)?;
+    }
+    out.flush().map_err(err)
+}

@@ -1,0 +1,155 @@
+//! Sampling a relative depth map at a pixel with a small robust window.
+
+use crate::geometry::Pixel;
+
+/// A borrowed single-channel map (relative inverse depth, or metric depth), row-major.
+#[derive(Debug, Clone, Copy)]
+pub struct RelativeMap<'a> {
+    /// Row-major values, `width * height` of them; non-finite values mean "no data".
+    pub data: &'a [f32],
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+}
+
+impl<'a> RelativeMap<'a> {
+    /// Wraps a row-major buffer; `None` when its length is not `width * height`.
+    pub fn new(data: &'a [f32], width: usize, height: usize) -> Option<Self> {
+        (width.checked_mul(height)? == data.len() && width > 0 && height > 0).then_some(Self { data, width, height })
+    }
+
+    /// Value of the pixel containing `px`, if inside the map and finite.
+    #[inline]
+    pub fn at(&self, px: Pixel) -> Option<f64> {
+        if !px.is_finite() || px.u < 0.0 || px.v < 0.0 {
+            return None;
+        }
+        let (x, y) = (px.u as usize, px.v as usize);
+        if x >= self.width || y >= self.height {
+            return None;
+        }
+        let v = self.data[y * self.width + x] as f64;
+        v.is_finite().then_some(v)
+    }
+}
+
+/// Largest supported window radius (a 9x9 window).
+pub const MAX_RADIUS: usize = 4;
+
+/// Median of the finite values in the `(2r+1) x (2r+1)` window centred on the pixel containing
+/// `px` (clipped to the image), the paper's "sample R at the reference point" made robust to a
+/// pixel or two of misregistration and to the object's edge. `values_ok` filters values (e.g.
+/// "non-zero" for depth maps where 0 means no data). Returns `None` when no value qualifies or the
+/// centre lies outside the map. `radius` is capped at [`MAX_RADIUS`]. Allocation-free.
+pub fn sample_median(map: &RelativeMap<'_>, px: Pixel, radius: usize, values_ok: impl Fn(f32) -> bool) -> Option<f64> {
+    if !px.is_finite() || px.u < 0.0 || px.v < 0.0 {
+        return None;
+    }
+    let (cx, cy) = (px.u as usize, px.v as usize);
+    if cx >= map.width || cy >= map.height {
+        return None;
+    }
+    let r = radius.min(MAX_RADIUS);
+    let mut buf = [0f32; (2 * MAX_RADIUS + 1) * (2 * MAX_RADIUS + 1)];
+    let mut n = 0;
+    for y in cy.saturating_sub(r)..=(cy + r).min(map.height - 1) {
+        let row = &map.data[y * map.width..(y + 1) * map.width];
+        for &v in &row[cx.saturating_sub(r)..=(cx + r).min(map.width - 1)] {
+            if v.is_finite() && values_ok(v) {
+                buf[n] = v;
+                n += 1;
+            }
+        }
+    }
+    if n == 0 {
+        return None;
+    }
+    let vals = &mut buf[..n];
+    vals.sort_unstable_by(|a, b| a.total_cmp(b));
+    let m = if n % 2 == 1 { vals[n / 2] as f64 } else { 0.5 * (vals[n / 2 - 1] as f64 + vals[n / 2] as f64) };
+    Some(m)
+}
+
+/// A low quantile of the values on a 9x9 grid spread over the central `frac` of a box (clipped to
+/// the image): a fish is nearer than the water or wall behind it, so a low quantile of the box's
+/// core picks the fish where a centre sample of a thin or bent fish would hit the background.
+/// `q` in `[0, 1]` (0.25 is a good default). `at` reads the map at a pixel (e.g.
+/// `|p| map.at(p)`). Allocation-free; `None` when nothing qualifies.
+pub fn sample_box_quantile(
+    bbox: &crate::geometry::PixelBox,
+    frac: f64,
+    q: f64,
+    at: impl Fn(Pixel) -> Option<f64>,
+) -> Option<f64> {
+    if !bbox.is_valid() {
+        return None;
+    }
+    const G: usize = 9;
+    let c = bbox.center();
+    let (hw, hh) = (0.5 * bbox.w * frac.clamp(0.0, 1.0), 0.5 * bbox.h * frac.clamp(0.0, 1.0));
+    let mut buf = [0f64; G * G];
+    let mut n = 0;
+    for j in 0..G {
+        let v = c.v - hh + 2.0 * hh * j as f64 / (G - 1) as f64;
+        for i in 0..G {
+            let u = c.u - hw + 2.0 * hw * i as f64 / (G - 1) as f64;
+            if let Some(val) = at(Pixel::new(u, v)).filter(|x| x.is_finite()) {
+                buf[n] = val;
+                n += 1;
+            }
+        }
+    }
+    if n == 0 {
+        return None;
+    }
+    let vals = &mut buf[..n];
+    vals.sort_unstable_by(|a, b| a.total_cmp(b));
+    let pos = q.clamp(0.0, 1.0) * (n - 1) as f64;
+    let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
+    Some(vals[lo] + (vals[hi] - vals[lo]) * (pos - lo as f64))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn median_ignores_an_outlier_pixel_and_nan() {
+        let mut data = vec![1.0f32; 25];
+        data[12] = 100.0; // the centre pixel is fouled
+        data[0] = f32::NAN;
+        let map = RelativeMap::new(&data, 5, 5).unwrap();
+        assert_eq!(map.at(Pixel::new(2.5, 2.5)), Some(100.0));
+        assert_eq!(sample_median(&map, Pixel::new(2.5, 2.5), 1, |_| true), Some(1.0));
+        assert_eq!(sample_median(&map, Pixel::new(2.5, 2.5), 0, |_| true), Some(100.0));
+        assert_eq!(sample_median(&map, Pixel::new(5.5, 2.5), 1, |_| true), None);
+        assert_eq!(sample_median(&map, Pixel::new(-0.5, 2.5), 1, |_| true), None);
+        assert_eq!(sample_median(&map, Pixel::new(0.5, 0.5), 1, |v| v > 1.0), None);
+        assert!(RelativeMap::new(&data, 4, 5).is_none());
+    }
+
+    #[test]
+    fn box_quantile_finds_a_thin_fish_in_front_of_the_wall() {
+        // 20x20 wall at 5 m with a 2-pixel-high fish at 2 m along row 9-10 (the box centre row is 10).
+        let mut data = vec![5.0f32; 400];
+        for x in 4..16 {
+            data[8 * 20 + x] = 2.0;
+            data[9 * 20 + x] = 2.0;
+        }
+        let map = RelativeMap::new(&data, 20, 20).unwrap();
+        let bbox = crate::geometry::PixelBox::new(4.0, 6.0, 12.0, 8.0);
+        assert_eq!(sample_median(&map, bbox.center(), 2, |_| true), Some(5.0));
+        assert_eq!(sample_box_quantile(&bbox, 0.5, 0.25, |p| map.at(p)), Some(2.0));
+        assert_eq!(sample_box_quantile(&bbox, 0.5, 1.0, |p| map.at(p)), Some(5.0));
+        let bad = crate::geometry::PixelBox::new(f64::NAN, 0.0, 1.0, 1.0);
+        assert_eq!(sample_box_quantile(&bad, 0.5, 0.25, |p| map.at(p)), None);
+    }
+
+    #[test]
+    fn median_of_even_count_is_mean_of_middle_two() {
+        let data = [1.0f32, 2.0, 3.0, 4.0];
+        let map = RelativeMap::new(&data, 2, 2).unwrap();
+        assert_eq!(sample_median(&map, Pixel::new(0.5, 0.5), 1, |_| true), Some(2.5));
+    }
+}

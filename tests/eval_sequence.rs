@@ -1,0 +1,292 @@
+//! `fme eval` end to end on a small sequence written here: known trajectories rendered into exact
+//! depth maps, so the expected speeds are known; and bad input (missing files, malformed rows, NaN)
+//! that must fail with the file and line named and a non-zero exit.
+
+use fme::eval::{DepthChoice, EvalOptions, FitChoice, evaluate};
+use fme::geometry::{Camera, Intrinsics, PixelBox, Pose, WorldPoint};
+use fme::sequence::{
+    CameraMeta, DepthMap, GeneratorMeta, GtBox, Meta, ReferenceObject, SeqInfo, Sequence, SequenceWriter, StagedDir,
+    WaterMeta, WorldRow,
+};
+use fme::units::Metres;
+use nalgebra::Vector3;
+use std::path::Path;
+use std::process::Command;
+
+const W: u32 = 320;
+const H: u32 = 192;
+const N: u32 = 60;
+const FPS: f64 = 30.0;
+
+fn camera() -> Camera {
+    let intrinsics = Intrinsics::from_hfov(W, H, 80.0).unwrap();
+    let pose = Pose::look_at(WorldPoint::new(3.0, -0.5, 1.5), WorldPoint::new(3.0, 3.0, 1.5), Vector3::z()).unwrap();
+    Camera { intrinsics, pose }
+}
+
+/// Fish `i`'s body centre at time `t`: constant velocity, and its velocity.
+fn fish(i: u32, t: f64) -> (WorldPoint, Vector3<f64>) {
+    let v = [Vector3::new(0.4, 0.0, 0.0), Vector3::new(-0.2, 0.3, 0.1), Vector3::new(0.1, -0.25, 0.0)][i as usize];
+    let p0 = [Vector3::new(2.0, 1.5, 1.4), Vector3::new(3.8, 0.8, 1.2), Vector3::new(3.0, 2.5, 1.8)][i as usize];
+    (WorldPoint(p0 + v * t), v)
+}
+
+fn references() -> Vec<ReferenceObject> {
+    let spots = [[1.4, 2.0, 0.6], [4.2, 1.4, 0.9], [2.2, 3.2, 2.2], [3.9, 2.8, 1.0], [2.9, 0.9, 2.1], [3.5, 3.4, 1.6]];
+    spots
+        .iter()
+        .enumerate()
+        .map(|(i, c)| ReferenceObject {
+            id: i as u32 + 1,
+            size_m: 0.1,
+            center_w: *c,
+            front_face_center_w: [c[0], c[1] - 0.05, c[2]],
+        })
+        .collect()
+}
+
+/// Writes the sequence: background wall at 4.5 m depth, reference squares and fish boxes painted
+/// at their depths (fish as flat rectangles: the box centre's depth is the body's camera z).
+fn write_sequence(target: &Path) {
+    write_sequence_with(target, false)
+}
+
+/// `flick`: every fourth frame each fish's box grows by 40% to the right for one frame (a tail swing),
+/// the box-centre fluctuation eq. 3 exists for.
+fn write_sequence_with(target: &Path, flick: bool) {
+    let cam = camera();
+    let stage = StagedDir::create(target, false).unwrap();
+    let w = SequenceWriter::new(stage.path()).unwrap();
+    let (mut gt, mut world) = (Vec::new(), Vec::new());
+    let refs = references();
+    for f in 1..=N {
+        let t = f64::from(f - 1) / FPS;
+        let img = image::RgbImage::from_pixel(W, H, image::Rgb([10, 80, 90]));
+        w.write_frame(f, &img, 80).unwrap();
+        let mut d = DepthMap::new(W, H);
+        d.mm.fill(4500);
+        let mut paint = |b: PixelBox, z: f64| {
+            for v in b.y.max(0.0) as u32..(b.bottom().min(H as f64)) as u32 {
+                for u in b.x.max(0.0) as u32..(b.right().min(W as f64)) as u32 {
+                    d.mm[(v * W + u) as usize] = DepthMap::encode(z);
+                }
+            }
+        };
+        // Paint far fish first so nearer ones cover them.
+        let mut fishes: Vec<(u32, WorldPoint, Vector3<f64>, f64)> = (0..3)
+            .map(|i| {
+                let (p, v) = fish(i, t);
+                (i, p, v, cam.pose.to_camera(&p).depth().0)
+            })
+            .collect();
+        fishes.sort_by(|a, b| b.3.total_cmp(&a.3));
+        for (i, p, v, z) in fishes {
+            let px = cam.world_to_pixel(&p).unwrap();
+            let size = 0.35 * cam.intrinsics.fx / z;
+            let mut bbox = PixelBox::from_center(px, size, size * 0.4);
+            paint(bbox, z);
+            if flick && (f + i) % 4 == 0 {
+                bbox.w *= 1.4;
+            }
+            gt.push(GtBox { frame: f, id: i + 1, bbox, visibility: 1.0 });
+            world.push(WorldRow {
+                frame: f,
+                id: i + 1,
+                position: p,
+                velocity: v,
+                length: Metres(0.35),
+                visibility: 1.0,
+            });
+        }
+        // References last, so a fish never hides one (hidden references are the robust fit's job).
+        for r in &refs {
+            let p = WorldPoint(Vector3::from(r.front_face_center_w));
+            let px = cam.world_to_pixel(&p).unwrap();
+            paint(PixelBox::from_center(px, 7.0, 7.0), cam.pose.to_camera(&p).depth().0);
+        }
+        w.write_depth(f, &d).unwrap();
+    }
+    gt.sort_by_key(|g| (g.frame, g.id));
+    world.sort_by_key(|g| (g.frame, g.id));
+    let meta = Meta {
+        fps: FPS,
+        width: W,
+        height: H,
+        frames: N,
+        seed: 3,
+        preset: "test".into(),
+        generator: GeneratorMeta { name: "eval-test".into(), version: "0".into() },
+        camera: CameraMeta::from_camera(&cam),
+        water: WaterMeta { kind: "3C".into(), attenuation_per_m: [0.342, 0.198, 0.223], backscatter: [0.1, 0.4, 0.4] },
+        reference_objects: refs,
+        layout: Some("F".into()),
+        pond_size_m: Some([6.0, 4.0, 3.0]),
+        fish: Some(3),
+    };
+    let info = SeqInfo {
+        name: "evaltest".into(),
+        im_dir: "img1".into(),
+        frame_rate: FPS,
+        seq_length: N,
+        im_width: W,
+        im_height: H,
+        im_ext: ".jpg".into(),
+    };
+    w.finish(&info, &meta, &gt, &world).unwrap();
+    stage.commit().unwrap();
+}
+
+fn summary(r: &fme::eval::EvalReport) -> String {
+    let mut j = serde_json::to_value(r).unwrap();
+    j.as_object_mut().unwrap().remove("series");
+    j.to_string()
+}
+
+fn fme() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_fme"))
+}
+
+#[test]
+fn gt_boxes_and_gt_depth_recover_known_speeds() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("seq");
+    write_sequence(&dir);
+    let seq = Sequence::open(&dir).unwrap();
+    let r = evaluate(&seq, &EvalOptions::default()).unwrap();
+    assert_eq!(r.frames, (N - 1) as usize);
+    // True mean speed: (0.4 + |(-0.2, 0.3, 0.1)| + |(0.1, -0.25, 0)|) / 3, constant.
+    let truth = (0.4 + (0.04f64 + 0.09 + 0.01).sqrt() + (0.01f64 + 0.0625).sqrt()) / 3.0;
+    assert!((r.mean_true_mps - truth).abs() < 1e-6);
+    // Only millimetre depth quantisation and box rounding to 1/100 px remain.
+    assert!(r.speed_rmse_mps < 0.03, "{}", summary(&r));
+    assert!((r.mean_est_mps - truth).abs() < 0.02, "{}", summary(&r));
+    assert!(r.depth_rmse_m.is_none());
+    assert_eq!(r.series.len(), N as usize);
+}
+
+#[test]
+fn post_processing_removes_box_fluctuation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("seq");
+    write_sequence_with(&dir, true);
+    let seq = Sequence::open(&dir).unwrap();
+    let mut opts = EvalOptions { postprocess: fme::postprocess::PostprocessConfig::paper(), ..Default::default() };
+    opts.motion.speed_span = fme::units::Seconds(0.0);
+    let r = evaluate(&seq, &opts).unwrap();
+    assert!(r.boxes_corrected > 0);
+    assert!(r.speed_rmse_raw_mps > 0.2, "{}", summary(&r));
+    assert!(r.speed_rmse_mps < 0.5 * r.speed_rmse_raw_mps, "{}", summary(&r));
+}
+
+#[test]
+fn relative_gt_with_inverse_and_robust_fits_gets_depth_right() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("seq");
+    write_sequence(&dir);
+    let seq = Sequence::open(&dir).unwrap();
+    let mut opts = EvalOptions { depth: DepthChoice::RelativeGt, fit: FitChoice::Inverse, ..Default::default() };
+    opts.relative.pixel_noise = 0.0;
+    opts.relative.low_freq = 0.0;
+    let exact = evaluate(&seq, &opts).unwrap();
+    assert_eq!(exact.references_visible, 6);
+    assert!(exact.depth_rmse_m.unwrap() < 0.01, "{}", summary(&exact));
+    assert_eq!(exact.depth_delta_1_25, Some(1.0));
+    assert!(exact.fit_residual_m.unwrap() < 0.01);
+    // Two fouled references: the plain inverse fit suffers, the robust one does not.
+    opts.foul_refs = 2;
+    let fouled = evaluate(&seq, &opts).unwrap();
+    opts.fit = FitChoice::Robust;
+    let robust = evaluate(&seq, &opts).unwrap();
+    assert!(fouled.depth_rmse_m.unwrap() > 0.1, "{}", summary(&fouled));
+    assert!(robust.depth_rmse_m.unwrap() < 0.01, "{}", summary(&robust));
+    assert_eq!(robust.references_rejected, 2 * N as u64);
+}
+
+#[test]
+fn cli_json_series_and_plot() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("seq");
+    write_sequence(&dir);
+    let (series, plot) = (tmp.path().join("s.csv"), tmp.path().join("p.png"));
+    let out = fme()
+        .args(["eval", "--sequence"])
+        .arg(&dir)
+        .args(["--depth", "relative-gt", "--fit", "robust", "--json", "--series"])
+        .arg(&series)
+        .arg("--plot")
+        .arg(&plot)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for k in [
+        "frames",
+        "speed_rmse_mps",
+        "speed_distcorr",
+        "error_ci95_mps",
+        "speed_rmse_raw_mps",
+        "depth_rmse_m",
+        "depth_delta_1_25",
+        "depth_delta_1_25_2",
+    ] {
+        assert!(j.get(k).is_some(), "missing {k} in {j}");
+    }
+    let csv = std::fs::read_to_string(&series).unwrap();
+    assert!(csv.starts_with("frame,t,true_mps,est_mps,n_fish\n"));
+    assert_eq!(csv.lines().count(), N as usize + 1);
+    let png = image::open(&plot).unwrap();
+    assert_eq!((png.width(), png.height()), (1200, 560));
+}
+
+fn fails_with(args: &[&str], dir: &Path, needles: &[&str]) {
+    let out = fme().args(["eval", "--sequence"]).arg(dir).args(args).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "expected failure for {args:?}");
+    for n in needles {
+        assert!(err.contains(n), "stderr lacks {n:?}: {err}");
+    }
+}
+
+#[test]
+fn bad_input_names_file_and_line_and_exits_non_zero() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("seq");
+    write_sequence(&dir);
+    // Options whose implementation comes later.
+    fails_with(&["--boxes", "tracker"], &dir, &["not available yet"]);
+    fails_with(&["--depth", "model"], &dir, &["not available yet"]);
+    // A track file with a malformed row and one with NaN.
+    let tracks = tmp.path().join("tracks.txt");
+    std::fs::write(&tracks, "1,1,10,10,20,8,1,-1,-1,-1\n2,1,oops,10,20,8,1,-1,-1,-1\n").unwrap();
+    fails_with(&["--boxes", tracks.to_str().unwrap()], &dir, &["tracks.txt:2"]);
+    std::fs::write(&tracks, "1,1,10,10,20,8,1,-1,-1,-1\n2,1,10,NaN,20,8,1,-1,-1,-1\n").unwrap();
+    fails_with(&["--boxes", tracks.to_str().unwrap()], &dir, &["tracks.txt:2"]);
+    fails_with(&["--boxes", tmp.path().join("none.txt").to_str().unwrap()], &dir, &["none.txt"]);
+    // NaN in gt/world.csv, line 4 (header + 3 rows of frame 1).
+    let world = dir.join("gt/world.csv");
+    let good_world = std::fs::read_to_string(&world).unwrap();
+    let mut lines: Vec<String> = good_world.lines().map(String::from).collect();
+    let mut cols: Vec<String> = lines[3].split(',').map(String::from).collect();
+    cols[5] = "NaN".into();
+    lines[3] = cols.join(",");
+    std::fs::write(&world, lines.join("\n") + "\n").unwrap();
+    fails_with(&[], &dir, &["world.csv:4"]);
+    std::fs::write(&world, &good_world).unwrap();
+    // Malformed gt.txt row 2.
+    let gt = dir.join("gt/gt.txt");
+    let good_gt = std::fs::read_to_string(&gt).unwrap();
+    let mut g: Vec<&str> = good_gt.lines().collect();
+    g[1] = "1,2,3";
+    std::fs::write(&gt, g.join("\n") + "\n").unwrap();
+    fails_with(&[], &dir, &["gt.txt:2"]);
+    std::fs::write(&gt, &good_gt).unwrap();
+    // A missing depth map, then a missing meta.json.
+    std::fs::remove_file(dir.join("depth/000007.png")).unwrap();
+    fails_with(&[], &dir, &["000007.png", "missing"]);
+    std::fs::remove_file(dir.join("meta.json")).unwrap();
+    fails_with(&[], &dir, &["meta.json"]);
+    fails_with(&[], &tmp.path().join("nowhere"), &["nowhere"]);
+    // Bad option values are usage errors (exit code 2).
+    let out = fme().args(["eval", "--sequence"]).arg(&dir).args(["--speed-span", "-1"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
