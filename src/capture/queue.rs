@@ -1,0 +1,134 @@
+//! Bounded frame queue between capture and pipeline: when full, the oldest frame is dropped and
+//! counted, so capture never waits on inference (a stale frame is worth less than a fresh one).
+
+use super::Frame;
+use std::collections::VecDeque;
+use std::sync::{Condvar, Mutex};
+use std::time::Duration;
+
+/// Counters of a [`FrameQueue`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct QueueStats {
+    /// Frames pushed.
+    pub pushed: u64,
+    /// Frames dropped because the queue was full.
+    pub dropped: u64,
+}
+
+#[derive(Debug)]
+struct Inner {
+    frames: VecDeque<Frame>,
+    stats: QueueStats,
+    closed: bool,
+}
+
+/// A bounded multi-producer queue that drops the oldest frame when full.
+#[derive(Debug)]
+pub struct FrameQueue {
+    capacity: usize,
+    inner: Mutex<Inner>,
+    ready: Condvar,
+}
+
+impl FrameQueue {
+    /// A queue holding at most `capacity` frames (at least 1). The storage is allocated once.
+    pub fn new(capacity: usize) -> Self {
+        let capacity = capacity.max(1);
+        Self {
+            capacity,
+            inner: Mutex::new(Inner { frames: VecDeque::with_capacity(capacity), stats: QueueStats::default(), closed: false }),
+            ready: Condvar::new(),
+        }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
+        // A panic while holding the lock cannot leave the deque inconsistent; keep going.
+        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Pushes a frame without ever blocking; returns the dropped (oldest) frame if the queue was full,
+    /// so the caller can recycle its buffer.
+    pub fn push(&self, frame: Frame) -> Option<Frame> {
+        let mut g = self.lock();
+        g.stats.pushed += 1;
+        let dropped = if g.frames.len() >= self.capacity {
+            g.stats.dropped += 1;
+            g.frames.pop_front()
+        } else {
+            None
+        };
+        g.frames.push_back(frame);
+        drop(g);
+        self.ready.notify_one();
+        dropped
+    }
+
+    /// Pops the oldest frame, waiting up to `timeout`. `None` on timeout or when closed and empty.
+    pub fn pop(&self, timeout: Duration) -> Option<Frame> {
+        let g = self.lock();
+        let (mut g, _) = self
+            .ready
+            .wait_timeout_while(g, timeout, |i| i.frames.is_empty() && !i.closed)
+            .unwrap_or_else(|p| p.into_inner());
+        g.frames.pop_front()
+    }
+
+    /// Closes the queue: waiting `pop`s return.
+    pub fn close(&self) {
+        self.lock().closed = true;
+        self.ready.notify_all();
+    }
+
+    /// Whether [`close`](Self::close) was called.
+    pub fn is_closed(&self) -> bool {
+        self.lock().closed
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> QueueStats {
+        self.lock().stats
+    }
+
+    /// Frames waiting.
+    pub fn len(&self) -> usize {
+        self.lock().frames.len()
+    }
+
+    /// Whether no frame is waiting.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::capture::PixelFormat;
+    use crate::units::Seconds;
+
+    fn frame(seq: u64) -> Frame {
+        Frame { seq, timestamp: Seconds(seq as f64), width: 1, height: 1, format: PixelFormat::Gray8, data: vec![0] }
+    }
+
+    #[test]
+    fn drops_oldest_and_counts() {
+        let q = FrameQueue::new(2);
+        assert!(q.push(frame(1)).is_none());
+        assert!(q.push(frame(2)).is_none());
+        assert_eq!(q.push(frame(3)).map(|f| f.seq), Some(1));
+        assert_eq!(q.stats(), QueueStats { pushed: 3, dropped: 1 });
+        let seqs: Vec<_> = std::iter::from_fn(|| q.pop(Duration::from_millis(1))).map(|f| f.seq).collect();
+        assert_eq!(seqs, vec![2, 3]);
+    }
+
+    #[test]
+    fn pop_times_out_and_close_wakes() {
+        let q = std::sync::Arc::new(FrameQueue::new(1));
+        assert!(q.pop(Duration::from_millis(5)).is_none());
+        let q2 = q.clone();
+        let h = std::thread::spawn(move || q2.pop(Duration::from_secs(10)).is_none());
+        std::thread::sleep(Duration::from_millis(20));
+        q.close();
+        assert_eq!(h.join().ok(), Some(true));
+    }
+}
