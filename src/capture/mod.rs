@@ -31,6 +31,8 @@ pub struct Frame {
     pub seq: u64,
     /// Capture time (kernel timestamp for V4L2; frame index / fps for recordings).
     pub timestamp: Seconds,
+    /// When the frame reached user space (start of the frame-to-register latency).
+    pub arrived: std::time::Instant,
     /// Width, px.
     pub width: u32,
     /// Height, px.
@@ -168,6 +170,7 @@ mod tests {
         let f = Frame {
             seq: 0,
             timestamp: Seconds(0.0),
+            arrived: std::time::Instant::now(),
             width: 2,
             height: 1,
             format: PixelFormat::Yuyv,

@@ -107,7 +107,7 @@ mod tests {
     use crate::units::Seconds;
 
     fn frame(seq: u64) -> Frame {
-        Frame { seq, timestamp: Seconds(seq as f64), width: 1, height: 1, format: PixelFormat::Gray8, data: vec![0] }
+        Frame { seq, timestamp: Seconds(seq as f64), arrived: std::time::Instant::now(), width: 1, height: 1, format: PixelFormat::Gray8, data: vec![0] }
     }
 
     #[test]

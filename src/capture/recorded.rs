@@ -101,6 +101,7 @@ impl FrameSource for RecordedSource {
         let frame = Frame {
             seq: self.delivered,
             timestamp,
+            arrived: Instant::now(),
             width: self.width,
             height: self.height,
             format: PixelFormat::Jpeg,

@@ -113,6 +113,7 @@ impl FrameSource for V4l2Source {
                 Ok(Frame {
                     seq: self.seq,
                     timestamp: ts,
+                    arrived: std::time::Instant::now(),
                     width: open.width,
                     height: open.height,
                     format: open.format,

@@ -181,6 +181,9 @@ impl Config {
         if !(self.service.live_view_s >= 0.0) {
             return err("service.live_view_s", "must be >= 0 s");
         }
+        if self.service.stop_grace_ms > 1500 {
+            return err("service.stop_grace_ms", "must be <= 1500 ms (shutdown must finish within 2 s)");
+        }
         Ok(())
     }
 }

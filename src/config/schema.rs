@@ -366,10 +366,12 @@ pub struct ServiceConfig {
     pub stall_after_s: f64,
     /// Print a live one-line view of the activity on stderr (for demos), s between refreshes (0 = off).
     pub live_view_s: f64,
+    /// On SIGTERM/SIGINT: keep serving the "stopped" registers this long before exiting, ms (<= 1500).
+    pub stop_grace_ms: u64,
 }
 
 impl Default for ServiceConfig {
     fn default() -> Self {
-        Self { systemd_notify: true, stall_after_s: 5.0, live_view_s: 0.0 }
+        Self { systemd_notify: true, stall_after_s: 5.0, live_view_s: 0.0, stop_grace_ms: 500 }
     }
 }
