@@ -137,20 +137,6 @@ impl Backoff {
     }
 }
 
-/// Opens the source named by a path: `/dev/...` is a V4L2 camera, a directory is a recording.
-pub fn open_source(cfg: &crate::config::SourceConfig) -> Result<Box<dyn FrameSource>, CaptureError> {
-    let path = &cfg.path;
-    if path.starts_with("/dev") {
-        let mut s = V4l2Source::new(cfg.clone());
-        s.reopen()?;
-        Ok(Box::new(s))
-    } else if path.is_dir() {
-        Ok(Box::new(RecordedSource::open(path, cfg.realtime, cfg.looping)?))
-    } else {
-        Err(CaptureError::NotFound { path: path.clone() })
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

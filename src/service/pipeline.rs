@@ -199,6 +199,7 @@ impl Pipeline for FrameDiffPipeline {
     }
 
     fn health(&self) -> StageHealth {
-        StageHealth { detector_ok: self.ok, ..StageHealth::default() }
+        // No depth stage here, so nothing to fail: depth_ok follows frame decoding like detector_ok.
+        StageHealth { detector_ok: self.ok, depth_ok: self.ok, ..StageHealth::default() }
     }
 }

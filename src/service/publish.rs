@@ -22,6 +22,8 @@ pub struct Publisher {
     /// Last publish (keepalive publishes when this gets old).
     pub last_publish: Option<Instant>,
     line: String,
+    /// Latched once the "stopped" block is published: a frame still in flight must not overwrite it.
+    stopped: bool,
 }
 
 impl Publisher {
@@ -36,6 +38,7 @@ impl Publisher {
             stall_after: Duration::from_secs_f64(cfg.service.stall_after_s),
             last_publish: None,
             line: String::with_capacity(128),
+            stopped: false,
         }
     }
 
@@ -108,8 +111,13 @@ impl Publisher {
         }
     }
 
-    /// Computes and publishes one update; returns the serial line to send (borrowed buffer).
+    /// Computes and publishes one update; returns the serial line to send (borrowed buffer). After a
+    /// `stopped` publish, later calls change nothing.
     pub fn publish(&mut self, shared: &Shared, now: Instant, stopped: bool) -> &str {
+        if self.stopped {
+            return &self.line;
+        }
+        self.stopped = stopped;
         let bank = &shared.bank;
         let link = match self.mode {
             ModbusMode::Off => false,
