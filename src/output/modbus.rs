@@ -231,6 +231,7 @@ pub async fn run_client(
     mut shutdown: tokio::sync::watch::Receiver<bool>,
 ) {
     let mut rx = bank.subscribe();
+    rx.mark_changed(); // write the current block at once, even if it was published before we subscribed
     let mut ctx: Option<tokio_modbus::client::Context> = None;
     let mut backoff = settings.backoff;
     let mut retry_at: Option<tokio::time::Instant> = None;
