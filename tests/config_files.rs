@@ -22,7 +22,8 @@ fn every_key_in_shipped_config_is_commented() {
             continue;
         }
         // Walk back over the keys of the same group to the comment that documents them.
-        let documented = lines[..i].iter().rev().take_while(|p| !p.trim().is_empty()).any(|p| p.trim().starts_with('#'));
+        let documented =
+            lines[..i].iter().rev().take_while(|p| !p.trim().is_empty()).any(|p| p.trim().starts_with('#'));
         assert!(documented, "config/fme.toml line {}: `{t}` has no comment", i + 1);
     }
 }

@@ -14,9 +14,11 @@ fn reply(port: &mut dyn SerialPort, acc: &mut String) -> String {
     let end = Instant::now() + Duration::from_secs(5);
     let mut buf = [0u8; 512];
     loop {
-        if let Some(i) = acc.find("OK\r\n").or_else(|| acc.find("ERR ")).map(|i| {
-            acc[i..].find("\r\n").map_or(acc.len(), |j| i + j + 2)
-        }) {
+        if let Some(i) = acc
+            .find("OK\r\n")
+            .or_else(|| acc.find("ERR "))
+            .map(|i| acc[i..].find("\r\n").map_or(acc.len(), |j| i + j + 2))
+        {
             let out = acc[..i].to_string();
             acc.drain(..i);
             return out;

@@ -4,8 +4,8 @@
 mod support;
 
 use fme::capture::{FrameSource, RecordedSource};
-use fme::output::registers::{FaultCode, decode_f32, join_u32, status};
 use fme::config::WordOrder;
+use fme::output::registers::{FaultCode, decode_f32, join_u32, status};
 use fme::service::{self, Daemon, RunOptions};
 use std::time::Duration;
 use tokio_modbus::prelude::*;

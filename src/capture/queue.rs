@@ -36,7 +36,11 @@ impl FrameQueue {
         let capacity = capacity.max(1);
         Self {
             capacity,
-            inner: Mutex::new(Inner { frames: VecDeque::with_capacity(capacity), stats: QueueStats::default(), closed: false }),
+            inner: Mutex::new(Inner {
+                frames: VecDeque::with_capacity(capacity),
+                stats: QueueStats::default(),
+                closed: false,
+            }),
             ready: Condvar::new(),
         }
     }
@@ -107,7 +111,15 @@ mod tests {
     use crate::units::Seconds;
 
     fn frame(seq: u64) -> Frame {
-        Frame { seq, timestamp: Seconds(seq as f64), arrived: std::time::Instant::now(), width: 1, height: 1, format: PixelFormat::Gray8, data: vec![0] }
+        Frame {
+            seq,
+            timestamp: Seconds(seq as f64),
+            arrived: std::time::Instant::now(),
+            width: 1,
+            height: 1,
+            format: PixelFormat::Gray8,
+            data: vec![0],
+        }
     }
 
     #[test]

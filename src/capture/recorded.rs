@@ -48,7 +48,9 @@ impl RecordedSource {
         let entries = std::fs::read_dir(&img_dir).map_err(|e| open_err(format!("{}: {e}", img_dir.display())))?;
         let mut files: Vec<PathBuf> = entries
             .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().map(|x| format!(".{}", x.to_string_lossy().to_ascii_lowercase())) == Some(ext.clone()))
+            .filter(|p| {
+                p.extension().map(|x| format!(".{}", x.to_string_lossy().to_ascii_lowercase())) == Some(ext.clone())
+            })
             .collect();
         files.sort();
         if files.is_empty() {

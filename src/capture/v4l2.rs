@@ -52,7 +52,8 @@ impl V4l2Source {
 
     fn open_device(&self) -> Result<Open, CaptureError> {
         let path = &self.cfg.path;
-        let err = |what: &str, e: std::io::Error| CaptureError::Open { path: path.clone(), message: format!("{what}: {e}") };
+        let err =
+            |what: &str, e: std::io::Error| CaptureError::Open { path: path.clone(), message: format!("{what}: {e}") };
         if !path.exists() {
             return Err(CaptureError::NotFound { path: path.clone() });
         }
@@ -90,7 +91,8 @@ impl V4l2Source {
         if let Err(e) = dev.set_params(&params) {
             tracing::warn!(camera = %path.display(), "cannot set {} fps: {e}", self.cfg.fps);
         }
-        let mut stream = Stream::with_buffers(&dev, Type::VideoCapture, self.cfg.buffers).map_err(|e| err("mmap", e))?;
+        let mut stream =
+            Stream::with_buffers(&dev, Type::VideoCapture, self.cfg.buffers).map_err(|e| err("mmap", e))?;
         stream.set_timeout(Duration::from_millis(self.cfg.timeout_ms));
         Ok(Open { stream: Some(stream), _dev: dev, width: got.width, height: got.height, format })
     }

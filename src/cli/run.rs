@@ -80,9 +80,7 @@ fn open_source(cfg: &Config) -> anyhow::Result<Box<dyn FrameSource>> {
     }
     match RecordedSource::open(path, cfg.source.realtime, cfg.source.looping) {
         Ok(s) => Ok(Box::new(s)),
-        Err(e @ CaptureError::NotFound { .. }) => {
-            Err(UsageError(format!("source.path / --source: {e}")).into())
-        }
+        Err(e @ CaptureError::NotFound { .. }) => Err(UsageError(format!("source.path / --source: {e}")).into()),
         Err(e) => Err(anyhow::Error::new(e).context("source.path / --source")),
     }
 }
@@ -90,9 +88,7 @@ fn open_source(cfg: &Config) -> anyhow::Result<Box<dyn FrameSource>> {
 /// Reads VmRSS and VmHWM (kB) from /proc/self/status.
 pub fn memory_kb() -> Option<(u64, u64)> {
     let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let get = |k: &str| {
-        s.lines().find(|l| l.starts_with(k))?.split_whitespace().nth(1)?.parse::<u64>().ok()
-    };
+    let get = |k: &str| s.lines().find(|l| l.starts_with(k))?.split_whitespace().nth(1)?.parse::<u64>().ok();
     Some((get("VmRSS:")?, get("VmHWM:")?))
 }
 

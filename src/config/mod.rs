@@ -178,7 +178,7 @@ impl Config {
             return err(if f.min_on_s >= 0.0 { "feeding.min_off_s" } else { "feeding.min_on_s" }, "must be >= 0 s");
         }
         positive("service.stall_after_s", self.service.stall_after_s)?;
-        if !(self.service.live_view_s >= 0.0) {
+        if self.service.live_view_s.is_nan() || self.service.live_view_s < 0.0 {
             return err("service.live_view_s", "must be >= 0 s");
         }
         if self.service.stop_grace_ms > 1500 {
@@ -312,7 +312,8 @@ mod tests {
 
     #[test]
     fn overrides_parse() {
-        let c = parse("[source]\npath = \"tests/data/seq\"\nloop = false\n[output.modbus]\nword_order = \"low-first\"\n");
+        let c =
+            parse("[source]\npath = \"tests/data/seq\"\nloop = false\n[output.modbus]\nword_order = \"low-first\"\n");
         let c = c.ok();
         assert_eq!(c.as_ref().map(|c| c.source.looping), Some(false));
         assert_eq!(c.map(|c| c.output.modbus.word_order), Some(WordOrder::LowFirst));

@@ -193,7 +193,8 @@ impl Session {
             }
             ("version", None, _) => {
                 let (maj, min) = registers::version();
-                let _ = write!(body, "fme {} (register map {maj}.{min}, {BLOCK_LEN} registers)", env!("CARGO_PKG_VERSION"));
+                let _ =
+                    write!(body, "fme {} (register map {maj}.{min}, {BLOCK_LEN} registers)", env!("CARGO_PKG_VERSION"));
                 Ok(())
             }
             ("activity", None, _) => {
@@ -282,9 +283,11 @@ impl Session {
                 }
                 Ok(())
             }
-            ("help" | "?" | "status" | "version" | "activity" | "tracks" | "calib" | "regs" | "counters" | "config", Some(_), _) => {
-                Err(format!("`{cmd}` takes no argument"))
-            }
+            (
+                "help" | "?" | "status" | "version" | "activity" | "tracks" | "calib" | "regs" | "counters" | "config",
+                Some(_),
+                _,
+            ) => Err(format!("`{cmd}` takes no argument")),
             _ => {
                 // Echo at most 20 printable characters of what was typed.
                 let shown: String = line.chars().take(20).collect();

@@ -162,7 +162,10 @@ fn serial_builder(cfg: &ModbusConfig) -> tokio_serial::SerialPortBuilder {
         Parity::Odd => tokio_serial::Parity::Odd,
     };
     let stop = if cfg.stop_bits == 2 { tokio_serial::StopBits::Two } else { tokio_serial::StopBits::One };
-    tokio_serial::new(&cfg.serial_device, cfg.baud).parity(parity).stop_bits(stop).data_bits(tokio_serial::DataBits::Eight)
+    tokio_serial::new(&cfg.serial_device, cfg.baud)
+        .parity(parity)
+        .stop_bits(stop)
+        .data_bits(tokio_serial::DataBits::Eight)
 }
 
 /// Opens the RTU serial device described by `cfg`.
@@ -217,7 +220,9 @@ async fn connect(s: &ClientSettings) -> Result<tokio_modbus::client::Context, St
             Ok(Err(e)) => Err(format!("connect {addr}: {e}")),
             Err(_) => Err(format!("connect {addr}: timed out")),
         },
-        ClientTarget::Rtu(cfg) => open_serial(cfg).map(|port| rtu::attach_slave(port, slave)).map_err(|e| e.to_string()),
+        ClientTarget::Rtu(cfg) => {
+            open_serial(cfg).map(|port| rtu::attach_slave(port, slave)).map_err(|e| e.to_string())
+        }
     }
 }
 
@@ -268,7 +273,8 @@ pub async fn run_client(
             }
         }
         let Some(c) = ctx.as_mut() else { continue };
-        let res = tokio::time::timeout(settings.timeout, c.write_multiple_registers(settings.base_address, &block)).await;
+        let res =
+            tokio::time::timeout(settings.timeout, c.write_multiple_registers(settings.base_address, &block)).await;
         let err = match res {
             Ok(Ok(Ok(()))) => None,
             Ok(Ok(Err(exc))) => Some(format!("PLC answered exception {exc:?}")),

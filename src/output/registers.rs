@@ -153,10 +153,7 @@ fn scaled_u16(v: f64, scale: f64, nan_value: u16) -> u16 {
 
 /// The crate version (major, minor) for registers 18-19.
 pub fn version() -> (u16, u16) {
-    (
-        env!("CARGO_PKG_VERSION_MAJOR").parse().unwrap_or(0),
-        env!("CARGO_PKG_VERSION_MINOR").parse().unwrap_or(0),
-    )
+    (env!("CARGO_PKG_VERSION_MAJOR").parse().unwrap_or(0), env!("CARGO_PKG_VERSION_MINOR").parse().unwrap_or(0))
 }
 
 /// Encodes the register block (pure; see the module table).

@@ -204,7 +204,7 @@ fn pipeline_loop(mut c: PipelineCtx) {
             Err(e) => {
                 errors += 1;
                 // First error and then every 100th: a flood of bad frames must not flood the journal.
-                if errors == 1 || errors % 100 == 0 {
+                if errors == 1 || errors.is_multiple_of(100) {
                     c.shared.log(Level::WARN, format!("pipeline error #{errors}: {e}"));
                 }
                 None
@@ -360,7 +360,14 @@ impl Daemon {
                     ),
                 };
                 client_task = Some(tokio::spawn(modbus::run_client(settings, bank.clone(), stop_rx.clone())));
-                shared.log(Level::INFO, format!("modbus client ({:?}) to {}", m.mode, if m.mode == ModbusMode::TcpClient { &m.peer } else { &m.serial_device }));
+                shared.log(
+                    Level::INFO,
+                    format!(
+                        "modbus client ({:?}) to {}",
+                        m.mode,
+                        if m.mode == ModbusMode::TcpClient { &m.peer } else { &m.serial_device }
+                    ),
+                );
             }
         }
 

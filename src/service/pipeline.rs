@@ -114,6 +114,7 @@ pub enum PipelineError {
 #[derive(Debug)]
 pub struct FrameDiffPipeline {
     prev: Vec<u8>,
+    cur: Vec<u8>,
     prev_t: Option<Seconds>,
     smoothed: Option<f64>,
     smoothing_s: f64,
@@ -131,6 +132,7 @@ impl FrameDiffPipeline {
     pub fn new(smoothing_s: f64, body_length_m: f64) -> Self {
         Self {
             prev: vec![0; Self::GRID * Self::GRID],
+            cur: vec![0; Self::GRID * Self::GRID],
             prev_t: None,
             smoothed: None,
             smoothing_s,
@@ -160,22 +162,24 @@ impl FrameDiffPipeline {
 
 impl Pipeline for FrameDiffPipeline {
     fn process(&mut self, frame: &Frame) -> Result<Option<ActivitySample>, PipelineError> {
-        let mut cur = vec![0u8; self.grid * self.grid];
-        if let Err(e) = self.sample_grid(frame, &mut cur) {
+        let mut cur = std::mem::take(&mut self.cur);
+        let r = self.sample_grid(frame, &mut cur);
+        self.cur = cur;
+        if let Err(e) = r {
             self.ok = false;
             return Err(e);
         }
         self.ok = true;
         let t = frame.timestamp;
         let prev_t = self.prev_t.replace(t);
-        let prev = std::mem::replace(&mut self.prev, cur);
+        std::mem::swap(&mut self.prev, &mut self.cur); // prev = this frame, cur = the previous one
         let Some(pt) = prev_t else { return Ok(None) };
         let dt = (t - pt).get();
-        if !(dt > 0.0) {
+        if dt.is_nan() || dt <= 0.0 {
             return Ok(None); // loop restart or duplicate timestamp: no speed across it
         }
-        let n = prev.len() as f64;
-        let diffs = prev.iter().zip(&self.prev).map(|(a, b)| (f64::from(*a) - f64::from(*b)).abs() / 255.0);
+        let n = self.cur.len() as f64;
+        let diffs = self.cur.iter().zip(&self.prev).map(|(a, b)| (f64::from(*a) - f64::from(*b)).abs() / 255.0);
         let (sum, sum2) = diffs.fold((0.0, 0.0), |(s, s2), d| (s + d, s2 + d * d));
         let mean = sum / n;
         let var = (sum2 / n - mean * mean).max(0.0);

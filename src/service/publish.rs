@@ -43,12 +43,20 @@ impl Publisher {
     }
 
     /// Computes the register inputs at `now` (pure apart from advancing the heartbeat and feeding rule).
-    pub fn inputs(&mut self, h: &Health, plc_link_ok: bool, feeding_ack: u16, now: Instant, stopped: bool) -> RegisterInputs {
+    pub fn inputs(
+        &mut self,
+        h: &Health,
+        plc_link_ok: bool,
+        feeding_ack: u16,
+        now: Instant,
+        stopped: bool,
+    ) -> RegisterInputs {
         self.heartbeat = self.heartbeat.wrapping_add(1);
         let age = h.last_sample_at.map(|t| now.saturating_duration_since(t));
         let stale = age.is_none_or(|a| a > self.stale_after);
         let sample = h.last_sample.filter(|_| !stale);
-        let stalled = h.camera_ok && h.last_processed_at.is_none_or(|t| now.saturating_duration_since(t) > self.stall_after);
+        let stalled =
+            h.camera_ok && h.last_processed_at.is_none_or(|t| now.saturating_duration_since(t) > self.stall_after);
         let uptime = now.saturating_duration_since(h.started);
         let smoothed = sample.map(|s| s.smoothed.get());
         let feeding = if stopped { false } else { self.feeding.update(uptime.as_secs_f64(), smoothed) };
