@@ -5,7 +5,7 @@ CARGO ?= cargo
 BIN := target/release/fme
 DEMO_OUT ?= target/demo
 
-.PHONY: all setup build test lint fmt clippy demo bench clean
+.PHONY: all setup build test lint fmt clippy demo bench clean demo-run bench-daemon
 
 all: build
 
@@ -32,6 +32,17 @@ demo: build
 
 bench: build
 	bash scripts/bench.sh
+
+# `fme run` on a recording (default: the demo sequence) with a Modbus TCP server on 127.0.0.1:5020 and a
+# live one-line view; stops after DEMO_FRAMES frames. Read it with mbpoll (see README).
+DEMO_SEQ ?= $(DEMO_OUT)/swarm
+DEMO_FRAMES ?= 450
+demo-run: build
+	$(BIN) run --config config/fme.toml --source $(DEMO_SEQ) --modbus-listen 127.0.0.1:5020 --live --max-frames $(DEMO_FRAMES)
+
+# Daemon edges: real-time replay (drops, latency, CPU, RSS) and a long as-fast-as-possible run.
+bench-daemon: setup
+	$(CARGO) bench --locked --bench daemon_replay
 
 clean:
 	$(CARGO) clean

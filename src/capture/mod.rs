@@ -110,6 +110,11 @@ pub trait FrameSource: Send {
     fn reopen(&mut self) -> Result<(), CaptureError>;
     /// A short description for logs and the console.
     fn describe(&self) -> String;
+    /// Whether frames come on their own clock (camera, real-time replay): then a full queue drops the
+    /// oldest frame. Unpaced sources (replay as fast as possible) are back-pressured instead.
+    fn paced(&self) -> bool {
+        true
+    }
 }
 
 /// Exponential backoff between `min` and `max`, doubling after each failure, reset on success.

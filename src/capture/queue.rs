@@ -28,6 +28,7 @@ pub struct FrameQueue {
     capacity: usize,
     inner: Mutex<Inner>,
     ready: Condvar,
+    space: Condvar,
 }
 
 impl FrameQueue {
@@ -42,6 +43,7 @@ impl FrameQueue {
                 closed: false,
             }),
             ready: Condvar::new(),
+            space: Condvar::new(),
         }
     }
 
@@ -67,6 +69,25 @@ impl FrameQueue {
         dropped
     }
 
+    /// Pushes a frame, waiting while the queue is full (back-pressure for unpaced sources such as a
+    /// recording replayed as fast as possible: every frame is processed, none dropped). Gives up and
+    /// returns the frame after `timeout` or when the queue is closed.
+    pub fn push_wait(&self, frame: Frame, timeout: Duration) -> Result<(), Frame> {
+        let g = self.lock();
+        let (mut g, _) = self
+            .space
+            .wait_timeout_while(g, timeout, |i| i.frames.len() >= self.capacity && !i.closed)
+            .unwrap_or_else(|p| p.into_inner());
+        if g.closed || g.frames.len() >= self.capacity {
+            return Err(frame);
+        }
+        g.stats.pushed += 1;
+        g.frames.push_back(frame);
+        drop(g);
+        self.ready.notify_one();
+        Ok(())
+    }
+
     /// Pops the oldest frame, waiting up to `timeout`. `None` on timeout or when closed and empty.
     pub fn pop(&self, timeout: Duration) -> Option<Frame> {
         let g = self.lock();
@@ -74,13 +95,19 @@ impl FrameQueue {
             .ready
             .wait_timeout_while(g, timeout, |i| i.frames.is_empty() && !i.closed)
             .unwrap_or_else(|p| p.into_inner());
-        g.frames.pop_front()
+        let f = g.frames.pop_front();
+        drop(g);
+        if f.is_some() {
+            self.space.notify_one();
+        }
+        f
     }
 
     /// Closes the queue: waiting `pop`s return.
     pub fn close(&self) {
         self.lock().closed = true;
         self.ready.notify_all();
+        self.space.notify_all();
     }
 
     /// Whether [`close`](Self::close) was called.
@@ -131,6 +158,20 @@ mod tests {
         assert_eq!(q.stats(), QueueStats { pushed: 3, dropped: 1 });
         let seqs: Vec<_> = std::iter::from_fn(|| q.pop(Duration::from_millis(1))).map(|f| f.seq).collect();
         assert_eq!(seqs, vec![2, 3]);
+    }
+
+    #[test]
+    fn push_wait_blocks_until_space() {
+        let q = std::sync::Arc::new(FrameQueue::new(1));
+        assert!(q.push_wait(frame(1), Duration::from_millis(1)).is_ok());
+        assert_eq!(q.push_wait(frame(2), Duration::from_millis(5)).map_err(|f| f.seq), Err(2));
+        let q2 = q.clone();
+        let h = std::thread::spawn(move || q2.push_wait(frame(3), Duration::from_secs(10)).is_ok());
+        std::thread::sleep(Duration::from_millis(20));
+        assert_eq!(q.pop(Duration::from_millis(1)).map(|f| f.seq), Some(1));
+        assert_eq!(h.join().ok(), Some(true));
+        assert_eq!(q.pop(Duration::from_millis(100)).map(|f| f.seq), Some(3));
+        assert_eq!(q.stats().dropped, 0);
     }
 
     #[test]

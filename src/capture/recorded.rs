@@ -118,6 +118,10 @@ impl FrameSource for RecordedSource {
         if self.dir.is_dir() { Ok(()) } else { Err(CaptureError::NotFound { path: self.dir.clone() }) }
     }
 
+    fn paced(&self) -> bool {
+        self.realtime
+    }
+
     fn describe(&self) -> String {
         format!(
             "recording {} ({} frames, {}x{} @ {} fps, {}{})",

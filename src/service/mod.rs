@@ -103,12 +103,23 @@ fn sleep_unless_stopping(shared: &Shared, d: Duration) -> bool {
 fn capture_loop(mut source: Box<dyn FrameSource>, queue: Arc<FrameQueue>, shared: Arc<Shared>, mut backoff: Backoff) {
     let mut window_start = Instant::now();
     let mut window_frames = 0u32;
+    let paced = source.paced();
     while !shared.stopping() {
         match source.next_frame() {
             Ok(frame) => {
                 backoff.reset();
                 let now = frame.arrived;
-                let _ = queue.push(frame);
+                if paced {
+                    let _ = queue.push(frame);
+                } else {
+                    let mut f = frame;
+                    while let Err(back) = queue.push_wait(f, Duration::from_millis(100)) {
+                        if shared.stopping() || queue.is_closed() {
+                            break;
+                        }
+                        f = back;
+                    }
+                }
                 let dropped = queue.stats().dropped;
                 window_frames += 1;
                 let elapsed = now.saturating_duration_since(window_start).as_secs_f64();
