@@ -62,7 +62,7 @@ fn config(seq: &Path) -> Config {
     c.source.path = seq.to_path_buf();
     c.output.modbus.mode = ModbusMode::TcpServer;
     c.output.modbus.listen = "127.0.0.1:0".into();
-    c.motion.output_rate_hz = 10.0;
+    c.output.rate_hz = 10.0;
     c.service.systemd_notify = false;
     c
 }

@@ -25,7 +25,7 @@ fn write(dir: &std::path::Path, name: &str, text: &str) -> std::path::PathBuf {
 fn bad_config_exit_code_2_names_key_and_line() {
     let dir = tempfile::tempdir().expect("tempdir");
     let cases = [
-        ("[source]\nfps = 30\n[motion]\noutput_rate_hz = 0.0\n", "motion.output_rate_hz", ":4:"),
+        ("[source]\nfps = 30\n[output]\nrate_hz = 0.0\n", "output.rate_hz", ":4:"),
         ("[source]\nwidht = 640\n", "source.widht", ":2:"),
         ("\n\n[output.modbus]\nmode = \"tcp\"\n", "output.modbus.mode", ":4:"),
         ("[feeding]\non_above_mps = 0.1\noff_below_mps = 0.5\n", "feeding.off_below_mps", ":3:"),

@@ -40,7 +40,7 @@ pub fn test_config(seq: &Path) -> Config {
     c.source.path = seq.to_path_buf();
     c.output.modbus.mode = ModbusMode::TcpServer;
     c.output.modbus.listen = "127.0.0.1:0".into();
-    c.motion.output_rate_hz = 10.0;
+    c.output.rate_hz = 10.0;
     c.motion.smoothing_s = 1.0;
     c.service.systemd_notify = false;
     c.service.stop_grace_ms = 300;

@@ -4,6 +4,7 @@
 //! the dotted key (`output.modbus.mode`), so a technician can fix the file without reading code.
 
 mod schema;
+mod stages;
 
 pub use schema::*;
 
@@ -128,11 +129,11 @@ impl Config {
         positive("postprocess.depth_window_s", self.postprocess.depth_window_s)?;
         positive("motion.body_length_m", self.motion.body_length_m)?;
         positive("motion.smoothing_s", self.motion.smoothing_s)?;
-        positive("motion.output_rate_hz", self.motion.output_rate_hz)?;
-        if self.motion.output_rate_hz > 100.0 {
-            return err("motion.output_rate_hz", "must be <= 100 Hz");
+        positive("output.rate_hz", self.output.rate_hz)?;
+        if self.output.rate_hz > 100.0 {
+            return err("output.rate_hz", "must be <= 100 Hz");
         }
-        positive("motion.stale_after_s", self.motion.stale_after_s)?;
+        positive("output.stale_after_s", self.output.stale_after_s)?;
         let m = &self.output.modbus;
         match m.mode {
             ModbusMode::TcpServer if m.listen.parse::<std::net::SocketAddr>().is_err() => {
@@ -306,8 +307,8 @@ mod tests {
             }
             other => panic!("expected Invalid, got {other:?}"),
         }
-        let e = parse("[motion]\noutput_rate_hz = -1.0\n").err();
-        assert_eq!(e.as_ref().and_then(|e| e.key()), Some("motion.output_rate_hz"));
+        let e = parse("[output]\nrate_hz = -1.0\n").err();
+        assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.rate_hz"));
     }
 
     #[test]

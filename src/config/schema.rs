@@ -7,6 +7,8 @@
 use serde::Deserialize;
 use std::path::PathBuf;
 
+pub use super::stages::{DepthConfig, DetectorConfig, MotionConfig, PostprocessConfig, TrackerConfig};
+
 /// The whole configuration of `fme run`.
 #[derive(Debug, Clone, Default, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
@@ -24,6 +26,76 @@ pub struct Config {
     /// `[motion]`: speeds and the activity index (paper eq. 5).
     pub motion: MotionConfig,
     /// `[output]`: Modbus and serial line.
+    pub output: OutputConfig,
+    /// `[console]`: serial field-diagnostics console.
+    pub console: ConsoleConfig,
+    /// `[feeding]`: the feeding-recommended rule.
+    pub feeding: FeedingConfig,
+    /// `[service]`: watchdog, logging, threads.
+    pub service: ServiceConfig,
+}
+
+/// Pixel format asked of a V4L2 camera.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum CameraFormat {
+    /// Motion JPEG (compressed; needed for 30 fps over USB 2.0 at 720p and above).
+    Mjpeg,
+    /// Packed YUV 4:2:2.
+    Yuyv,
+}
+
+/// `[source]`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct SourceConfig {
+    /// A V4L2 device (`/dev/videoN`) or a MOTChallenge sequence directory (`img1/`, `seqinfo.ini`).
+    pub path: PathBuf,
+    /// Requested width, px (camera only; the driver may pick another, which is logged).
+    pub width: u32,
+    /// Requested height, px (camera only).
+    pub height: u32,
+    /// Requested frame rate, frames/s (camera only).
+    pub fps: u32,
+    /// Camera pixel format.
+    pub format: CameraFormat,
+    /// Number of MMAP buffers (camera only).
+    pub buffers: u32,
+    /// Capture timeout, ms: no frame for this long = camera stalled -> reconnect.
+    pub timeout_ms: u64,
+    /// Recorded sequences: pace frames at the sequence's fps (true) or as fast as possible (false).
+    pub realtime: bool,
+    /// Recorded sequences: start again at the end, like a camera that never stops.
+    #[serde(rename = "loop")]
+    pub looping: bool,
+    /// Frames held between capture and pipeline; when full the oldest is dropped and counted.
+    pub queue_frames: usize,
+    /// First reconnect delay after a camera failure, ms (doubles up to `reconnect_max_ms`).
+    pub reconnect_min_ms: u64,
+    /// Longest reconnect delay, ms.
+    pub reconnect_max_ms: u64,
+}
+
+impl Default for SourceConfig {
+    fn default() -> Self {
+        Self {
+            path: PathBuf::from("/dev/video0"),
+            width: 640,
+            height: 384,
+            fps: 30,
+            format: CameraFormat::Mjpeg,
+            buffers: 4,
+            timeout_ms: 2000,
+            realtime: true,
+            looping: true,
+            queue_frames: 4,
+            reconnect_min_ms: 500,
+            reconnect_max_ms: 30_000,
+        }
+    }
+}
+
+/// `[output]`: Modbus and serial line.
     pub output: OutputConfig,
     /// `[console]`: serial field-diagnostics console.
     pub console: ConsoleConfig,
@@ -185,26 +257,32 @@ pub struct MotionConfig {
     pub min_fish: u32,
     /// Time constant of the smoothed activity value (EWMA), s.
     pub smoothing_s: f64,
-    /// Rate of activity samples sent to the outputs, Hz.
-    pub output_rate_hz: f64,
-    /// A value older than this is flagged stale, s.
-    pub stale_after_s: f64,
 }
 
 impl Default for MotionConfig {
     fn default() -> Self {
-        Self { body_length_m: 0.35, min_fish: 3, smoothing_s: 60.0, output_rate_hz: 1.0, stale_after_s: 5.0 }
+        Self { body_length_m: 0.35, min_fish: 3, smoothing_s: 60.0 }
     }
 }
 
-/// `[output]`: groups `[output.modbus]` and `[output.serial]`.
-#[derive(Debug, Clone, Default, Deserialize, PartialEq)]
+/// `[output]`: update rate and staleness, plus `[output.modbus]` and `[output.serial]`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct OutputConfig {
+    /// Activity updates sent to the outputs, Hz (the heartbeat register increments at this rate).
+    pub rate_hz: f64,
+    /// A value older than this is flagged stale and published as NaN, s.
+    pub stale_after_s: f64,
     /// `[output.modbus]`.
     pub modbus: ModbusConfig,
     /// `[output.serial]`.
     pub serial: SerialLineConfig,
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        Self { rate_hz: 1.0, stale_after_s: 5.0, modbus: ModbusConfig::default(), serial: SerialLineConfig::default() }
+    }
 }
 
 /// Modbus role.

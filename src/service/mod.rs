@@ -426,7 +426,7 @@ impl Daemon {
             shared: shared.clone(),
             publisher: publisher.clone(),
             serial_tx: serial_tx.clone(),
-            output_period_s: 1.0 / cfg.motion.output_rate_hz,
+            output_period_s: 1.0 / cfg.output.rate_hz,
             max_frames: opts.max_frames,
             watchdog,
             finished: finished_tx,
@@ -441,7 +441,7 @@ impl Daemon {
         // Keepalive: with no samples (camera down, pipeline failing) the registers still update, so
         // the PLC sees the heartbeat, the stale bit and the fault code.
         let mut aux_tasks = Vec::new();
-        let period = Duration::from_secs_f64(1.0 / cfg.motion.output_rate_hz);
+        let period = Duration::from_secs_f64(1.0 / cfg.output.rate_hz);
         let (sh, pb, stx) = (shared.clone(), publisher.clone(), serial_tx.clone());
         aux_tasks.push(tokio::spawn(async move {
             let mut tick = tokio::time::interval(period / 2);

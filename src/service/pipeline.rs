@@ -15,7 +15,7 @@ pub struct QualityFlags {
     pub too_few_fish: bool,
     /// No metric depth fit yet (reference objects not seen): speeds are in uncalibrated units.
     pub depth_uncalibrated: bool,
-    /// The value is older than `motion.stale_after_s` (set by the service, not the pipeline).
+    /// The value is older than `output.stale_after_s` (set by the service, not the pipeline).
     pub stale: bool,
 }
 

@@ -34,7 +34,7 @@ impl Publisher {
             feeding: FeedingRule::new(cfg.feeding.clone()),
             order: cfg.output.modbus.word_order,
             mode: cfg.output.modbus.mode,
-            stale_after: Duration::from_secs_f64(cfg.motion.stale_after_s),
+            stale_after: Duration::from_secs_f64(cfg.output.stale_after_s),
             stall_after: Duration::from_secs_f64(cfg.service.stall_after_s),
             last_publish: None,
             line: String::with_capacity(128),
