@@ -112,3 +112,54 @@ fn recording_run_stops_cleanly_on_sigterm() {
     assert!(err.contains("frames captured"), "summary printed: {err}");
     assert!(ms < 2000, "shutdown took {ms} ms");
 }
+
+/// systemd notify protocol without systemd: a datagram socket stands in for NOTIFY_SOCKET.
+#[test]
+fn systemd_ready_watchdog_and_stopping() {
+    use std::os::unix::net::UnixDatagram;
+    let dir = tempfile::tempdir().expect("tempdir");
+    support::write_sequence(&dir.path().join("seq"), 10, 64, 48, 30);
+    let sock_path = dir.path().join("notify.sock");
+    let sock = UnixDatagram::bind(&sock_path).expect("bind notify socket");
+    sock.set_read_timeout(Some(Duration::from_millis(100))).expect("timeout");
+    let cfg = write(dir.path(), "run.toml", "[output.modbus]\nlisten = \"127.0.0.1:0\"\n");
+    let mut child = fme()
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .arg("--source")
+        .arg(dir.path().join("seq"))
+        .env("NOTIFY_SOCKET", &sock_path)
+        .env("WATCHDOG_USEC", "400000")
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("spawn");
+    let mut msgs = Vec::new();
+    let mut buf = [0u8; 512];
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_millis(1500) {
+        if let Ok(n) = sock.recv(&mut buf) {
+            msgs.push(String::from_utf8_lossy(&buf[..n]).to_string());
+        }
+    }
+    let st = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill");
+    assert!(st.success());
+    let end = Instant::now() + Duration::from_secs(3);
+    while Instant::now() < end {
+        if let Ok(n) = sock.recv(&mut buf) {
+            msgs.push(String::from_utf8_lossy(&buf[..n]).to_string());
+        }
+        if child.try_wait().expect("wait").is_some() {
+            break;
+        }
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    while let Ok(n) = sock.recv(&mut buf) {
+        msgs.push(String::from_utf8_lossy(&buf[..n]).to_string());
+    }
+    let all = msgs.join("|");
+    assert!(all.contains("READY=1"), "{all}");
+    // WATCHDOG_USEC = 0.4 s -> a ping every 0.2 s from the frame loop: at least 4 in 1.5 s.
+    assert!(all.matches("WATCHDOG=1").count() >= 4, "{all}");
+    assert!(all.contains("STOPPING=1"), "{all}");
+}
