@@ -92,3 +92,54 @@ async fn finite_recording_as_fast_as_possible_finishes() {
     assert!(h.updates >= 2, "output at 10 Hz on the frame clock over 0.8 s of video: {}", h.updates);
     daemon.shutdown().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn serial_line_output_over_pty() {
+    use std::io::Read;
+    let dir = tempfile::tempdir().expect("tempdir");
+    support::write_sequence(dir.path(), 20, 64, 48, 30);
+    let (mut logger, line_end) = serialport::TTYPort::pair().expect("pty pair");
+    serialport::SerialPort::set_timeout(&mut logger, Duration::from_millis(100)).expect("timeout");
+    let mut cfg = support::test_config(dir.path());
+    cfg.output.modbus.mode = fme::config::ModbusMode::Off;
+    cfg.output.serial.enabled = true;
+    cfg.output.serial.device = serialport::SerialPort::name(&line_end).expect("pty name");
+    let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
+    let daemon = Daemon::start(
+        cfg.clone(),
+        String::new(),
+        src,
+        service::build_pipeline(&cfg).expect("p"),
+        RunOptions::default(),
+    )
+    .await
+    .expect("start");
+    let text = tokio::task::spawn_blocking(move || {
+        let mut acc = String::new();
+        let mut buf = [0u8; 1024];
+        let end = std::time::Instant::now() + Duration::from_secs(3);
+        while std::time::Instant::now() < end && acc.matches("\r\n").count() < 6 {
+            if let Ok(n) = logger.read(&mut buf) {
+                acc.push_str(&String::from_utf8_lossy(&buf[..n]));
+            }
+        }
+        acc
+    })
+    .await
+    .expect("join");
+    daemon.shutdown().await;
+    drop(line_end);
+    let lines: Vec<&str> = text.split("\r\n").filter(|l| l.starts_with('$')).collect();
+    assert!(lines.len() >= 5, "one line per update: {text:?}");
+    let mut last_hb = None;
+    for l in &lines {
+        let f = fme::output::serial_line::parse_line(l).unwrap_or_else(|| panic!("bad checksum or format: {l:?}"));
+        assert_eq!(f[0], "FME");
+        assert_eq!(f.len(), 11);
+        let hb: u32 = f[1].parse().expect("heartbeat");
+        if let Some(p) = last_hb {
+            assert!(hb > p, "heartbeat increases: {lines:?}");
+        }
+        last_hb = Some(hb);
+    }
+}

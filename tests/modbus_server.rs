@@ -1,10 +1,15 @@
 //! Modbus server roles against in-process clients: register reads, mirrored holding registers,
 //! exceptions for illegal addresses and functions, PLC-writable holding registers; TCP and RTU.
 
-use fme::config::WordOrder;
+#[path = "daemon_support.rs"]
+mod support;
+
+use fme::capture::{FrameSource, RecordedSource};
+use fme::config::{ModbusMode, WordOrder};
 use fme::output::bank::RegisterBank;
 use fme::output::modbus;
 use fme::output::registers::{self, RegisterInputs, decode_f32, status};
+use fme::service::{self, Daemon, RunOptions};
 use std::sync::Arc;
 use std::time::Duration;
 use tokio_modbus::ExceptionCode;
@@ -125,4 +130,62 @@ async fn rtu_server_over_pty_pair() {
     let r = tokio::time::timeout(Duration::from_millis(300), ctx.read_input_registers(0, 1)).await;
     assert!(r.is_err(), "a request for unit 9 must be ignored by unit 5: {r:?}");
     let _ = tx.send(());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn daemon_rtu_server_role_and_missing_adapter() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    support::write_sequence(dir.path(), 20, 64, 48, 30);
+    // Adapter missing at start: the daemon runs anyway and keeps retrying.
+    let mut cfg = support::test_config(dir.path());
+    cfg.output.modbus.mode = ModbusMode::RtuServer;
+    cfg.output.modbus.serial_device = "/dev/ttyFME-absent".into();
+    cfg.output.modbus.reconnect_min_ms = 50;
+    let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
+    let d = Daemon::start(
+        cfg.clone(),
+        String::new(),
+        src,
+        service::build_pipeline(&cfg).expect("p"),
+        RunOptions::default(),
+    )
+    .await
+    .expect("start without the adapter");
+    let hb = d.shared().bank.block()[12];
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    assert_ne!(d.shared().bank.block()[12], hb, "running without the RS-485 adapter");
+    d.shutdown().await;
+
+    // With a device (one end of a pty pair; the PLC is on the other end).
+    use tokio_serial::SerialPort as _;
+    let (plc_end, box_end) = tokio_serial::SerialStream::pair().expect("pty pair");
+    cfg.output.modbus.serial_device = box_end.name().expect("pty name");
+    cfg.output.modbus.parity = fme::config::Parity::None;
+    cfg.output.modbus.unit_id = 4;
+    let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
+    let d = Daemon::start(
+        cfg.clone(),
+        String::new(),
+        src,
+        service::build_pipeline(&cfg).expect("p"),
+        RunOptions::default(),
+    )
+    .await
+    .expect("start");
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let mut ctx = rtu::attach_slave(plc_end, Slave(4));
+    let mut beats = Vec::new();
+    for _ in 0..3 {
+        let r = tokio::time::timeout(Duration::from_secs(2), ctx.read_input_registers(10, 3))
+            .await
+            .expect("rtu read timed out")
+            .expect("transport")
+            .expect("exception");
+        assert_ne!(r[0] & status::RUNNING, 0);
+        beats.push(r[2]);
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
+    assert!(beats.windows(2).all(|w| w[1] > w[0]), "heartbeat over RTU: {beats:?}");
+    d.shutdown().await;
+    drop(box_end);
 }

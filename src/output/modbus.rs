@@ -188,6 +188,54 @@ pub async fn serve_rtu(
     }
 }
 
+/// RTU server role with recovery: opens `cfg.serial_device`, serves, and on an open failure or a
+/// lost device (USB RS-485 adapter unplugged) logs, waits with backoff and reopens, until `shutdown`.
+pub async fn run_rtu_server(
+    cfg: ModbusConfig,
+    bank: Arc<RegisterBank>,
+    mut shutdown: tokio::sync::watch::Receiver<bool>,
+) {
+    let mut backoff =
+        Backoff::new(Duration::from_millis(cfg.reconnect_min_ms), Duration::from_millis(cfg.reconnect_max_ms));
+    while !*shutdown.borrow() {
+        match open_serial(&cfg) {
+            Ok(port) => {
+                backoff.reset();
+                tracing::info!("modbus rtu server on {} unit {}", cfg.serial_device, cfg.unit_id);
+                let mut rx = shutdown.clone();
+                let stop = async move {
+                    let _ = rx.wait_for(|s| *s).await;
+                };
+                let server = tokio_modbus::server::rtu::Server::new(port);
+                let svc = RegisterService::new(bank.clone(), Some(cfg.unit_id));
+                // serve_until needs a Sync future; run the stop signal through a oneshot.
+                let (tx, orx) = tokio::sync::oneshot::channel::<()>();
+                let relay = tokio::spawn(async move {
+                    stop.await;
+                    let _ = tx.send(());
+                });
+                let res = server
+                    .serve_until(svc, async move {
+                        let _ = orx.await;
+                    })
+                    .await;
+                relay.abort();
+                match res {
+                    Ok(tokio_modbus::server::Terminated::Aborted) => return,
+                    Ok(_) => tracing::warn!("modbus rtu {}: port closed", cfg.serial_device),
+                    Err(e) => tracing::warn!("modbus rtu {}: {e}", cfg.serial_device),
+                }
+            }
+            Err(e) => tracing::warn!("{e}"),
+        }
+        let d = backoff.next_delay();
+        tokio::select! {
+            _ = tokio::time::sleep(d) => {},
+            _ = shutdown.changed() => {},
+        }
+    }
+}
+
 /// How a client reaches the PLC.
 #[derive(Debug, Clone)]
 pub enum ClientTarget {

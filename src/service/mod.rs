@@ -339,12 +339,8 @@ impl Daemon {
                 shared.log(Level::INFO, format!("modbus tcp server on {addr}"));
             }
             ModbusMode::RtuServer => {
-                let port = modbus::open_serial(m)?;
-                let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-                server_stops.push(tx);
-                server_tasks.push(tokio::spawn(modbus::serve_rtu(port, bank.clone(), m.unit_id, async move {
-                    let _ = rx.await;
-                })));
+                // A missing RS-485 adapter is retried with backoff, not fatal.
+                server_tasks.push(tokio::spawn(modbus::run_rtu_server(m.clone(), bank.clone(), stop_rx.clone())));
                 shared.log(Level::INFO, format!("modbus rtu server on {} unit {}", m.serial_device, m.unit_id));
             }
             ModbusMode::TcpClient | ModbusMode::RtuClient => {
