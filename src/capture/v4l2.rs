@@ -98,21 +98,6 @@ impl V4l2Source {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn not_a_camera_is_an_error_not_a_panic() {
-        let cfg = SourceConfig { path: "/dev/null".into(), ..SourceConfig::default() };
-        let mut s = V4l2Source::new(cfg);
-        assert!(matches!(s.reopen(), Err(CaptureError::Open { .. })));
-        assert!(matches!(s.next_frame(), Err(CaptureError::Read { .. })));
-        let missing = SourceConfig { path: "/dev/video-fme-none".into(), ..SourceConfig::default() };
-        assert!(matches!(V4l2Source::new(missing).reopen(), Err(CaptureError::NotFound { .. })));
-    }
-}
-
 impl FrameSource for V4l2Source {
     fn next_frame(&mut self) -> Result<Frame, CaptureError> {
         let path = self.cfg.path.clone();
@@ -160,5 +145,20 @@ impl FrameSource for V4l2Source {
             Some(o) => format!("camera {} ({}x{} {:?})", self.cfg.path.display(), o.width, o.height, o.format),
             None => format!("camera {} (closed)", self.cfg.path.display()),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn not_a_camera_is_an_error_not_a_panic() {
+        let cfg = SourceConfig { path: "/dev/null".into(), ..SourceConfig::default() };
+        let mut s = V4l2Source::new(cfg);
+        assert!(matches!(s.reopen(), Err(CaptureError::Open { .. })));
+        assert!(matches!(s.next_frame(), Err(CaptureError::Read { .. })));
+        let missing = SourceConfig { path: "/dev/video-fme-none".into(), ..SourceConfig::default() };
+        assert!(matches!(V4l2Source::new(missing).reopen(), Err(CaptureError::NotFound { .. })));
     }
 }
