@@ -29,6 +29,7 @@ lint: setup
 demo: build
 	$(BIN) synth --preset swarm --fish 20 --frames 150 --seed 7 --out $(DEMO_OUT)/swarm --force
 	@echo "demo: synthetic swarm sequence written to $(DEMO_OUT)/swarm"
+	$(MAKE) --no-print-directory demo-run
 
 bench: build
 	bash scripts/bench.sh

@@ -7,6 +7,7 @@
 //! stand-in, so this measures the daemon around the pipeline, not detection/depth).
 //!
 //! Environment: `FME_BENCH_REALTIME_S` (default 20), `FME_BENCH_FAST_FRAMES` (default 100000).
+//! Run without `--bench` (as `cargo test --all-targets` does) it only smoke-runs: 3 s and 300 frames.
 
 use fme::capture::{FrameSource, RecordedSource};
 use fme::config::{Config, ModbusMode};
@@ -79,7 +80,8 @@ async fn main() {
     println!("daemon bench: {frames}-frame {w}x{h} 30 fps JPEG recording, pipeline = service::build_pipeline");
 
     // Phase 1: real time, looping, PLC polling the registers every 100 ms.
-    let secs = env_num("FME_BENCH_REALTIME_S", 20);
+    let bench_mode = std::env::args().any(|a| a == "--bench");
+    let secs = env_num("FME_BENCH_REALTIME_S", if bench_mode { 20 } else { 3 });
     let cfg = config(dir.path());
     let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
     let pipe = service::build_pipeline(&cfg).expect("pipeline");
@@ -124,7 +126,7 @@ async fn main() {
     daemon.shutdown().await;
 
     // Phase 2: as fast as possible, many frames, memory sampled along the way.
-    let n = env_num("FME_BENCH_FAST_FRAMES", 100_000);
+    let n = env_num("FME_BENCH_FAST_FRAMES", if bench_mode { 100_000 } else { 300 });
     let mut cfg = config(dir.path());
     cfg.source.realtime = false;
     let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), false, true).expect("open"));
