@@ -39,7 +39,7 @@ impl LatencyHistogram {
     pub fn max_ms(&self) -> f64 {
         self.max_ms
     }
-    /// Upper bound of the bucket holding quantile `q` (0..1), ms; `None` when empty.
+    /// Upper bound of the 1 ms bucket holding quantile `q` (0..1), capped at the maximum, ms; `None` when empty.
     pub fn quantile_ms(&self, q: f64) -> Option<f64> {
         if self.count == 0 {
             return None;
@@ -49,7 +49,8 @@ impl LatencyHistogram {
         for (i, b) in self.buckets.iter().enumerate() {
             acc += u64::from(*b);
             if acc >= target {
-                return Some(if i == 1000 { self.max_ms } else { (i + 1) as f64 });
+                // Upper bucket edge, but never above the largest value actually seen.
+                return Some(if i == 1000 { self.max_ms } else { ((i + 1) as f64).min(self.max_ms) });
             }
         }
         Some(self.max_ms)
