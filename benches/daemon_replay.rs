@@ -139,7 +139,7 @@ async fn main() {
     let step = (n / 10).max(1);
     let mut next = step;
     loop {
-        let done = tokio::time::timeout(Duration::from_millis(200), daemon.finished()).await.is_ok();
+        let done = tokio::time::timeout(Duration::from_millis(200), daemon.finished()).await.is_ok_and(|ok| ok);
         let p = shared.health().frames_processed;
         if p >= next || done {
             rss.push((p, proc_status_kb("VmRSS:")));

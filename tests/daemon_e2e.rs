@@ -84,7 +84,9 @@ async fn finite_recording_as_fast_as_possible_finishes() {
     let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), false, false).expect("open"));
     let pipeline = service::build_pipeline(&cfg).expect("pipeline");
     let mut daemon = Daemon::start(cfg, String::new(), source, pipeline, RunOptions::default()).await.expect("start");
-    tokio::time::timeout(Duration::from_secs(20), daemon.finished()).await.expect("finishes at end of recording");
+    let normal =
+        tokio::time::timeout(Duration::from_secs(20), daemon.finished()).await.expect("finishes at end of recording");
+    assert!(normal, "normal end, not a dead pipeline thread");
     let h = daemon.shared().health();
     assert_eq!(h.frames_captured, 25);
     assert_eq!(h.frames_processed, 25, "an unpaced replay is back-pressured: every frame processed");
@@ -142,4 +144,42 @@ async fn serial_line_output_over_pty() {
         }
         last_hb = Some(hb);
     }
+}
+
+/// A stage that panics on some frames (e.g. a decoder bug on a corrupt frame).
+struct PanicsSometimes(u32);
+
+impl fme::service::pipeline::Pipeline for PanicsSometimes {
+    fn process(
+        &mut self,
+        frame: &fme::capture::Frame,
+    ) -> Result<Option<fme::service::pipeline::ActivitySample>, fme::service::pipeline::PipelineError> {
+        self.0 += 1;
+        if self.0.is_multiple_of(3) {
+            panic!("corrupt frame {}", frame.seq);
+        }
+        Ok(None)
+    }
+    fn health(&self) -> fme::service::pipeline::StageHealth {
+        fme::service::pipeline::StageHealth::default()
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn panicking_stage_is_counted_not_fatal() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    support::write_sequence(dir.path(), 30, 64, 48, 30);
+    let mut cfg = support::test_config(dir.path());
+    cfg.output.modbus.mode = fme::config::ModbusMode::Off;
+    let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), false, false).expect("open"));
+    let mut daemon = Daemon::start(cfg, String::new(), source, Box::new(PanicsSometimes(0)), RunOptions::default())
+        .await
+        .expect("start");
+    let normal = tokio::time::timeout(Duration::from_secs(20), daemon.finished()).await.expect("finishes");
+    assert!(normal, "the pipeline thread survived the panics");
+    let h = daemon.shared().health();
+    assert_eq!(h.frames_processed, 30);
+    assert_eq!(h.pipeline_errors, 10);
+    assert!(daemon.shared().last_logs(50).iter().any(|l| l.contains("panicked: corrupt frame")));
+    daemon.shutdown().await;
 }

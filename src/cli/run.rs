@@ -106,7 +106,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         let reason = tokio::select! {
             _ = term.recv() => "SIGTERM",
             _ = tokio::signal::ctrl_c() => "SIGINT",
-            () = daemon.finished() => "end of input",
+            ok = daemon.finished() => if ok { "end of input" } else { "pipeline thread died" },
         };
         tracing::info!("{reason}: shutting down");
         let shared = daemon.shared().clone();
@@ -127,6 +127,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             hwm,
             t0.elapsed().as_millis()
         );
+        if reason == "pipeline thread died" {
+            anyhow::bail!("the pipeline thread died; exiting with an error so that the service manager restarts fme");
+        }
         Ok::<(), anyhow::Error>(())
     })
 }

@@ -100,7 +100,40 @@ fn sleep_unless_stopping(shared: &Shared, d: Duration) -> bool {
     shared.stopping()
 }
 
-fn capture_loop(mut source: Box<dyn FrameSource>, queue: Arc<FrameQueue>, shared: Arc<Shared>, mut backoff: Backoff) {
+/// The message of a caught panic.
+fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
+    let msg = p.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| p.downcast_ref::<String>().cloned());
+    format!("panicked: {}", msg.unwrap_or_else(|| "(no message)".into()))
+}
+
+/// Runs the capture loop, restarting it (after the reconnect backoff) if a source panics.
+fn capture_thread(mut source: Box<dyn FrameSource>, queue: Arc<FrameQueue>, shared: Arc<Shared>, backoff: Backoff) {
+    loop {
+        let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            capture_loop(&mut source, &queue, &shared, backoff);
+        }));
+        match run {
+            Ok(()) => return,
+            Err(p) => {
+                shared.with_health(|h| {
+                    h.camera_ok = false;
+                    h.capture_errors += 1;
+                });
+                shared.log(Level::ERROR, format!("capture {}; restarting capture", panic_text(&*p)));
+                let mut b = backoff;
+                if sleep_unless_stopping(&shared, b.next_delay()) {
+                    queue.close();
+                    return;
+                }
+                if let Err(e) = source.reopen() {
+                    shared.log(Level::WARN, format!("camera reconnect failed: {e}"));
+                }
+            }
+        }
+    }
+}
+
+fn capture_loop(source: &mut Box<dyn FrameSource>, queue: &FrameQueue, shared: &Shared, mut backoff: Backoff) {
     let mut window_start = Instant::now();
     let mut window_frames = 0u32;
     let paced = source.paced();
@@ -149,7 +182,7 @@ fn capture_loop(mut source: Box<dyn FrameSource>, queue: Arc<FrameQueue>, shared
                 shared.log(Level::WARN, format!("camera: {e}"));
                 loop {
                     let d = backoff.next_delay();
-                    if sleep_unless_stopping(&shared, d) {
+                    if sleep_unless_stopping(shared, d) {
                         break;
                     }
                     match source.reopen() {
@@ -203,7 +236,11 @@ fn pipeline_loop(mut c: PipelineCtx) {
             }
             continue;
         };
-        let result = c.pipeline.process(&frame);
+        // A panic in a stage on one bad frame must not end the pipeline: count it as an error.
+        let result = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| c.pipeline.process(&frame))) {
+            Ok(r) => r,
+            Err(p) => Err(pipeline::PipelineError::Stage { stage: "pipeline", message: panic_text(&*p) }),
+        };
         let now = Instant::now();
         processed += 1;
         let mut due = false;
@@ -411,7 +448,7 @@ impl Daemon {
         other_threads.push(
             std::thread::Builder::new()
                 .name("fme-capture".into())
-                .spawn(move || capture_loop(source, q, sh, backoff))
+                .spawn(move || capture_thread(source, q, sh, backoff))
                 .map_err(|source| ServiceError::Spawn { what: "capture", source })?,
         );
         let watchdog = if cfg.service.systemd_notify { sd_notify::watchdog_enabled() } else { None };
@@ -499,9 +536,11 @@ impl Daemon {
         self.modbus_addr
     }
 
-    /// Resolves when the pipeline thread ends by itself (end of a non-looping recording, `max_frames`).
-    pub async fn finished(&mut self) {
-        let _ = self.finished.wait_for(|f| *f).await;
+    /// Resolves when the pipeline thread ends by itself: `true` at the end of a non-looping recording
+    /// or after `max_frames`; `false` if the thread died (the caller should exit non-zero so that
+    /// systemd's `Restart=on-failure` restarts the service).
+    pub async fn finished(&mut self) -> bool {
+        self.finished.wait_for(|f| *f).await.is_ok()
     }
 
     /// Clean shutdown (SIGTERM/SIGINT): writes status "stopped" to the registers first (running bit
