@@ -104,8 +104,9 @@ pub enum CaptureError {
 
 /// A source of timestamped frames. `next_frame` blocks until a frame is ready (paced sources sleep).
 pub trait FrameSource: Send {
-    /// The next frame.
-    fn next_frame(&mut self) -> Result<Frame, CaptureError>;
+    /// The next frame, written into `buf` (a cleared, possibly recycled buffer: no allocation once
+    /// its capacity fits a frame).
+    fn next_frame(&mut self, buf: Vec<u8>) -> Result<Frame, CaptureError>;
     /// (Re)opens the source after an error; called by the capture loop with backoff between tries.
     fn reopen(&mut self) -> Result<(), CaptureError>;
     /// A short description for logs and the console.

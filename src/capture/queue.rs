@@ -1,5 +1,7 @@
 //! Bounded frame queue between capture and pipeline: when full, the oldest frame is dropped and
 //! counted, so capture never waits on inference (a stale frame is worth less than a fresh one).
+//! It also keeps a small pool of frame buffers: the pipeline hands each buffer back after use and
+//! capture reuses it, so steady-state capture allocates nothing per frame.
 
 use super::Frame;
 use std::collections::VecDeque;
@@ -29,6 +31,7 @@ pub struct FrameQueue {
     inner: Mutex<Inner>,
     ready: Condvar,
     space: Condvar,
+    pool: Mutex<Vec<Vec<u8>>>,
 }
 
 impl FrameQueue {
@@ -44,6 +47,7 @@ impl FrameQueue {
             }),
             ready: Condvar::new(),
             space: Condvar::new(),
+            pool: Mutex::new(Vec::with_capacity(capacity + 2)),
         }
     }
 
@@ -103,6 +107,21 @@ impl FrameQueue {
         f
     }
 
+    /// A cleared buffer for the next frame: a recycled one when available, else a new empty one.
+    pub fn take_buffer(&self) -> Vec<u8> {
+        let mut b = self.pool.lock().unwrap_or_else(|p| p.into_inner()).pop().unwrap_or_default();
+        b.clear();
+        b
+    }
+
+    /// Returns a frame buffer for reuse (dropped when the pool is full).
+    pub fn recycle(&self, buf: Vec<u8>) {
+        let mut pool = self.pool.lock().unwrap_or_else(|p| p.into_inner());
+        if pool.len() < self.capacity + 2 && buf.capacity() > 0 {
+            pool.push(buf);
+        }
+    }
+
     /// Closes the queue: waiting `pop`s return.
     pub fn close(&self) {
         self.lock().closed = true;
@@ -158,6 +177,18 @@ mod tests {
         assert_eq!(q.stats(), QueueStats { pushed: 3, dropped: 1 });
         let seqs: Vec<_> = std::iter::from_fn(|| q.pop(Duration::from_millis(1))).map(|f| f.seq).collect();
         assert_eq!(seqs, vec![2, 3]);
+    }
+
+    #[test]
+    fn buffers_are_recycled() {
+        let q = FrameQueue::new(1);
+        let mut b = q.take_buffer();
+        b.extend_from_slice(&[1, 2, 3]);
+        let ptr = b.as_ptr();
+        q.recycle(b);
+        let b2 = q.take_buffer();
+        assert!(b2.is_empty() && b2.capacity() >= 3);
+        assert_eq!(b2.as_ptr(), ptr, "same allocation reused");
     }
 
     #[test]

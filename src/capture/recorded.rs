@@ -82,7 +82,7 @@ impl RecordedSource {
 }
 
 impl FrameSource for RecordedSource {
-    fn next_frame(&mut self) -> Result<Frame, CaptureError> {
+    fn next_frame(&mut self, buf: Vec<u8>) -> Result<Frame, CaptureError> {
         let n = self.files.len() as u64;
         if !self.looping && self.delivered >= n {
             return Err(CaptureError::End);
@@ -98,8 +98,11 @@ impl FrameSource for RecordedSource {
             }
         }
         let path = &self.files[idx];
-        let data =
-            std::fs::read(path).map_err(|e| CaptureError::Read { path: path.clone(), message: e.to_string() })?;
+        let mut data = buf;
+        data.clear();
+        std::fs::File::open(path)
+            .and_then(|mut f| std::io::Read::read_to_end(&mut f, &mut data))
+            .map_err(|e| CaptureError::Read { path: path.clone(), message: e.to_string() })?;
         let frame = Frame {
             seq: self.delivered,
             timestamp,

@@ -99,7 +99,7 @@ impl V4l2Source {
 }
 
 impl FrameSource for V4l2Source {
-    fn next_frame(&mut self) -> Result<Frame, CaptureError> {
+    fn next_frame(&mut self, mut data: Vec<u8>) -> Result<Frame, CaptureError> {
         let path = self.cfg.path.clone();
         let Some(open) = self.open.as_mut() else {
             return Err(CaptureError::Read { path, message: "camera not open".into() });
@@ -112,6 +112,8 @@ impl FrameSource for V4l2Source {
                 // The buffer is the whole mapping: only `bytesused` bytes are the frame (matters for MJPEG).
                 let used = (meta.bytesused as usize).min(buf.len());
                 let ts = Seconds(meta.timestamp.sec as f64 + meta.timestamp.usec as f64 * 1e-6);
+                data.clear();
+                data.extend_from_slice(&buf[..used]);
                 Ok(Frame {
                     seq: self.seq,
                     timestamp: ts,
@@ -119,7 +121,7 @@ impl FrameSource for V4l2Source {
                     width: open.width,
                     height: open.height,
                     format: open.format,
-                    data: buf[..used].to_vec(),
+                    data,
                 })
             }
             Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {
@@ -157,7 +159,7 @@ mod tests {
         let cfg = SourceConfig { path: "/dev/null".into(), ..SourceConfig::default() };
         let mut s = V4l2Source::new(cfg);
         assert!(matches!(s.reopen(), Err(CaptureError::Open { .. })));
-        assert!(matches!(s.next_frame(), Err(CaptureError::Read { .. })));
+        assert!(matches!(s.next_frame(Vec::new()), Err(CaptureError::Read { .. })));
         let missing = SourceConfig { path: "/dev/video-fme-none".into(), ..SourceConfig::default() };
         assert!(matches!(V4l2Source::new(missing).reopen(), Err(CaptureError::NotFound { .. })));
     }

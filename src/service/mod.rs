@@ -138,12 +138,14 @@ fn capture_loop(source: &mut Box<dyn FrameSource>, queue: &FrameQueue, shared: &
     let mut window_frames = 0u32;
     let paced = source.paced();
     while !shared.stopping() {
-        match source.next_frame() {
+        match source.next_frame(queue.take_buffer()) {
             Ok(frame) => {
                 backoff.reset();
                 let now = frame.arrived;
                 if paced {
-                    let _ = queue.push(frame);
+                    if let Some(old) = queue.push(frame) {
+                        queue.recycle(old.data);
+                    }
                 } else {
                     let mut f = frame;
                     while let Err(back) = queue.push_wait(f, Duration::from_millis(100)) {
@@ -298,6 +300,7 @@ fn pipeline_loop(mut c: PipelineCtx) {
             let ms = frame.arrived.elapsed().as_secs_f64() * 1000.0;
             c.shared.with_health(|h| h.latency.record(ms));
         }
+        c.queue.recycle(frame.data);
         if c.max_frames.is_some_and(|m| processed >= m) {
             c.shared.log(Level::INFO, format!("processed {processed} frames: stopping as asked"));
             break;
