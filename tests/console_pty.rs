@@ -32,10 +32,15 @@ fn reply(port: &mut dyn SerialPort, acc: &mut String) -> String {
     }
 }
 
+/// Sends a command; returns the reply without the echoed command line.
 fn ask(port: &mut dyn SerialPort, acc: &mut String, cmd: &str) -> String {
     port.write_all(cmd.as_bytes()).expect("write");
     port.write_all(b"\r\n").expect("write");
-    reply(port, acc)
+    let r = reply(port, acc);
+    let echo = format!("{cmd}\r\n");
+    // Streamed lines may come before the echo; everything else follows it.
+    assert!(r.contains(&echo), "typed characters are echoed: {r:?}");
+    r.replacen(&echo, "", 1)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -100,21 +105,26 @@ async fn console_commands_and_fuzz() {
             x ^= x << 17;
             junk.push(if i % 4000 == 3999 { b'\n' } else { (x >> 24) as u8 });
         }
-        for chunk in junk.chunks(1024) {
-            port.write_all(chunk).expect("write junk");
-            // Drain replies so the pty buffer never fills.
-            let _ = port.read(&mut buf);
-        }
-        port.write_all(&vec![b'x'; 5000]).expect("long line");
-        port.write_all(b"\r\n\r\n").expect("write");
-        std::thread::sleep(Duration::from_millis(300));
-        let mut drain = [0u8; 4096];
-        while let Ok(n) = port.read(&mut drain) {
-            if n == 0 {
-                break;
+        let mut drain = [0u8; 8192];
+        let mut drain_all = |port: &mut dyn SerialPort, acc: &mut String| {
+            // Read until the console has been quiet for one port timeout (100 ms).
+            while let Ok(n) = port.read(&mut drain) {
+                if n == 0 {
+                    break;
+                }
+                acc.push_str(&String::from_utf8_lossy(&drain[..n]));
             }
-            acc.push_str(&String::from_utf8_lossy(&drain[..n]));
+        };
+        for chunk in junk.chunks(2048) {
+            port.write_all(chunk).expect("write junk");
+            drain_all(port, &mut acc); // keep the pty buffers from filling
         }
+        for _ in 0..5 {
+            port.write_all(&[b'x'; 1000]).expect("long line");
+            drain_all(port, &mut acc);
+        }
+        port.write_all(b"\r\n\r\n").expect("write");
+        drain_all(port, &mut acc);
         assert!(acc.contains("ERR"), "fuzz must get error lines");
         acc.clear();
         let v = ask(port, &mut acc, "version");

@@ -236,11 +236,13 @@ pub struct ConsoleConfig {
     pub baud: u32,
     /// Log lines kept for `log [n]`.
     pub log_lines: usize,
+    /// Echo typed characters back (picocom/screen do not echo locally).
+    pub echo: bool,
 }
 
 impl Default for ConsoleConfig {
     fn default() -> Self {
-        Self { enabled: false, device: "/dev/ttyS0".into(), baud: 115_200, log_lines: 200 }
+        Self { enabled: false, device: "/dev/ttyS0".into(), baud: 115_200, log_lines: 200, echo: true }
     }
 }
 

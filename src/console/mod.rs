@@ -77,12 +77,15 @@ impl LineReader {
     }
 }
 
-/// A console session: line assembly plus the `stream` flag.
+/// A console session: line assembly, echo and the `stream` flag.
 #[derive(Debug, Default)]
 pub struct Session {
     reader: LineReader,
     /// Whether `stream on` is active.
     pub stream: bool,
+    /// Echo typed characters (terminals like picocom do not echo locally).
+    pub echo: bool,
+    echo_cr: bool,
 }
 
 fn status_words(bits: u16) -> String {
@@ -145,11 +148,25 @@ const HELP: &str = "commands (case-insensitive, read-only):
   config          the configuration file in use";
 
 impl Session {
-    /// Feeds received bytes; appends replies to `out`.
+    /// Feeds received bytes; appends echo and replies to `out`, in order.
     pub fn feed(&mut self, bytes: &[u8], shared: &Shared, out: &mut String) {
-        let mut events = Vec::new();
-        self.reader.feed(bytes, |e| events.push(e));
-        for e in events {
+        for &b in bytes {
+            if self.echo {
+                let was_cr = std::mem::replace(&mut self.echo_cr, b == b'\r');
+                match b {
+                    b'\n' if was_cr => {}
+                    b'\r' | b'\n' => out.push_str("\r\n"),
+                    0x08 | 0x7f => out.push_str("\x08 \x08"),
+                    // A flood is not echoed past the line limit; binary noise is not echoed at all.
+                    b'\t' | 0x20..=0x7e if !self.reader.overflow && self.reader.buf.len() < MAX_LINE => {
+                        out.push(b as char)
+                    }
+                    _ => {}
+                }
+            }
+            let mut event = None;
+            self.reader.feed(std::slice::from_ref(&b), |e| event = Some(e));
+            let Some(e) = event else { continue };
             match e {
                 LineEvent::Line(l) => self.command(&l, shared, out),
                 LineEvent::TooLong => {
@@ -309,8 +326,8 @@ impl Session {
 
 /// Serves the console on an open port until a stop is requested. I/O errors end the session (the
 /// caller reopens the device).
-pub fn serve(port: &mut dyn serialport::SerialPort, shared: &Shared) -> std::io::Result<()> {
-    let mut session = Session::default();
+pub fn serve(port: &mut dyn serialport::SerialPort, shared: &Shared, echo: bool) -> std::io::Result<()> {
+    let mut session = Session { echo, ..Session::default() };
     let mut buf = [0u8; 256];
     let mut out = String::with_capacity(1024);
     let mut last_hb = shared.bank.block()[12];
@@ -339,14 +356,14 @@ pub fn serve(port: &mut dyn serialport::SerialPort, shared: &Shared) -> std::io:
 }
 
 /// Opens `device` and serves the console, reopening with backoff after errors, until a stop.
-pub fn run_on_device(device: &str, baud: u32, shared: &Shared) {
+pub fn run_on_device(device: &str, baud: u32, echo: bool, shared: &Shared) {
     let mut backoff = crate::capture::Backoff::new(Duration::from_millis(500), Duration::from_secs(30));
     while !shared.stopping() {
         match serialport::new(device, baud).timeout(Duration::from_millis(100)).open() {
             Ok(mut port) => {
                 backoff.reset();
                 shared.log(tracing::Level::INFO, format!("console on {device} at {baud} baud"));
-                if let Err(e) = serve(port.as_mut(), shared) {
+                if let Err(e) = serve(port.as_mut(), shared, echo) {
                     shared.log(tracing::Level::WARN, format!("console {device}: {e}"));
                 }
             }
@@ -411,6 +428,16 @@ mod tests {
         sess.feed(b"Stream OFF\nconfig\n", &s, &mut out);
         assert!(!sess.stream);
         assert!(out.contains("path = \"x\""));
+    }
+
+    #[test]
+    fn echo_in_order_with_replies() {
+        let s = shared();
+        let mut sess = Session { echo: true, ..Session::default() };
+        let mut out = String::new();
+        sess.feed(b"vex\x7frsion\r\nhelp\x00\r\n", &s, &mut out);
+        assert!(out.starts_with("vex\x08 \x08rsion\r\nfme "), "{out:?}");
+        assert!(out.contains("OK\r\nhelp\r\nERR binary input ignored\r\n"), "{out:?}");
     }
 
     #[test]

@@ -433,11 +433,12 @@ impl Daemon {
             None
         };
         if cfg.console.enabled {
-            let (dev, baud, sh) = (cfg.console.device.clone(), cfg.console.baud, shared.clone());
+            let (dev, baud, echo, sh) =
+                (cfg.console.device.clone(), cfg.console.baud, cfg.console.echo, shared.clone());
             other_threads.push(
                 std::thread::Builder::new()
                     .name("fme-console".into())
-                    .spawn(move || crate::console::run_on_device(&dev, baud, &sh))
+                    .spawn(move || crate::console::run_on_device(&dev, baud, echo, &sh))
                     .map_err(|source| ServiceError::Spawn { what: "console", source })?,
             );
         }
