@@ -46,8 +46,8 @@ pub fn effective_config(args: &RunArgs) -> anyhow::Result<(Config, String)> {
         cfg.source.path = s.clone();
     }
     if let Some(l) = &args.modbus_listen {
-        if l.parse::<std::net::SocketAddr>().is_err() {
-            return Err(UsageError(format!("--modbus-listen: must be IP:PORT, got {l:?}")).into());
+        if !crate::config::is_host_port(l) {
+            return Err(UsageError(format!("--modbus-listen: must be HOST:PORT, got {l:?}")).into());
         }
         cfg.output.modbus.mode = ModbusMode::TcpServer;
         cfg.output.modbus.listen = l.clone();

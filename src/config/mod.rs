@@ -136,11 +136,11 @@ impl Config {
         positive("output.stale_after_s", self.output.stale_after_s)?;
         let m = &self.output.modbus;
         match m.mode {
-            ModbusMode::TcpServer if m.listen.parse::<std::net::SocketAddr>().is_err() => {
-                return err("output.modbus.listen", format!("must be IP:PORT, got {:?}", m.listen));
+            ModbusMode::TcpServer if !is_host_port(&m.listen) => {
+                return err("output.modbus.listen", format!("must be HOST:PORT, got {:?}", m.listen));
             }
-            ModbusMode::TcpClient if m.peer.parse::<std::net::SocketAddr>().is_err() => {
-                return err("output.modbus.peer", format!("must be IP:PORT, got {:?}", m.peer));
+            ModbusMode::TcpClient if !is_host_port(&m.peer) => {
+                return err("output.modbus.peer", format!("must be HOST:PORT, got {:?}", m.peer));
             }
             ModbusMode::RtuServer | ModbusMode::RtuClient if m.serial_device.is_empty() => {
                 return err("output.modbus.serial_device", "must name a serial device");
@@ -186,6 +186,22 @@ impl Config {
             return err("service.stop_grace_ms", "must be <= 1500 ms (shutdown must finish within 2 s)");
         }
         Ok(())
+    }
+}
+
+/// Whether `s` looks like `HOST:PORT` (an IPv4/IPv6 socket address, or a host name and a port).
+/// Names are resolved when used, not here: validation must not depend on DNS.
+pub fn is_host_port(s: &str) -> bool {
+    if s.parse::<std::net::SocketAddr>().is_ok() {
+        return true;
+    }
+    match s.rsplit_once(':') {
+        Some((host, port)) => {
+            port.parse::<u16>().is_ok()
+                && !host.is_empty()
+                && host.chars().all(|c| c.is_ascii_alphanumeric() || c == '.' || c == '-')
+        }
+        None => false,
     }
 }
 
@@ -309,6 +325,16 @@ mod tests {
         }
         let e = parse("[output]\nrate_hz = -1.0\n").err();
         assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.rate_hz"));
+    }
+
+    #[test]
+    fn host_port_forms() {
+        for ok in ["0.0.0.0:502", "[::1]:5020", "localhost:5020", "plc-1.farm.local:502"] {
+            assert!(is_host_port(ok), "{ok}");
+        }
+        for bad in ["localhost", ":502", "plc:99999", "plc 1:502", ""] {
+            assert!(!is_host_port(bad), "{bad}");
+        }
     }
 
     #[test]

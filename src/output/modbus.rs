@@ -239,8 +239,8 @@ pub async fn run_rtu_server(
 /// How a client reaches the PLC.
 #[derive(Debug, Clone)]
 pub enum ClientTarget {
-    /// Modbus TCP to this address.
-    Tcp(SocketAddr),
+    /// Modbus TCP to this HOST:PORT (resolved at each connect attempt).
+    Tcp(String),
     /// Modbus RTU on this serial config.
     Rtu(ModbusConfig),
 }
@@ -263,11 +263,20 @@ pub struct ClientSettings {
 async fn connect(s: &ClientSettings) -> Result<tokio_modbus::client::Context, String> {
     let slave = Slave(s.unit_id);
     match &s.target {
-        ClientTarget::Tcp(addr) => match tokio::time::timeout(s.timeout, tcp::connect_slave(*addr, slave)).await {
-            Ok(Ok(ctx)) => Ok(ctx),
-            Ok(Err(e)) => Err(format!("connect {addr}: {e}")),
-            Err(_) => Err(format!("connect {addr}: timed out")),
-        },
+        ClientTarget::Tcp(peer) => {
+            let attempt = async {
+                let addr = tokio::net::lookup_host(peer.as_str())
+                    .await?
+                    .next()
+                    .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::NotFound, "no address"))?;
+                tcp::connect_slave(addr, slave).await
+            };
+            match tokio::time::timeout(s.timeout, attempt).await {
+                Ok(Ok(ctx)) => Ok(ctx),
+                Ok(Err(e)) => Err(format!("connect {peer}: {e}")),
+                Err(_) => Err(format!("connect {peer}: timed out")),
+            }
+        }
         ClientTarget::Rtu(cfg) => {
             open_serial(cfg).map(|port| rtu::attach_slave(port, slave)).map_err(|e| e.to_string())
         }

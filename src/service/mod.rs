@@ -385,14 +385,7 @@ impl Daemon {
             }
             ModbusMode::TcpClient | ModbusMode::RtuClient => {
                 let target = if m.mode == ModbusMode::TcpClient {
-                    // Validated as IP:PORT by Config::validate; re-checked here for configs built in code.
-                    let addr = m.peer.parse::<SocketAddr>().map_err(|e| {
-                        ServiceError::Modbus(ModbusError::Bind {
-                            addr: m.peer.clone(),
-                            source: std::io::Error::new(std::io::ErrorKind::InvalidInput, e),
-                        })
-                    })?;
-                    ClientTarget::Tcp(addr)
+                    ClientTarget::Tcp(m.peer.clone()) // resolved at each connect: DNS changes are picked up
                 } else {
                     ClientTarget::Rtu(m.clone())
                 };
