@@ -100,9 +100,10 @@ impl FrameSource for RecordedSource {
         let path = &self.files[idx];
         let mut data = buf;
         data.clear();
-        std::fs::File::open(path)
-            .and_then(|mut f| std::io::Read::read_to_end(&mut f, &mut data))
-            .map_err(|e| CaptureError::Read { path: path.clone(), message: e.to_string() })?;
+        if let Err(e) = std::fs::File::open(path).and_then(|mut f| std::io::Read::read_to_end(&mut f, &mut data)) {
+            self.delivered += 1; // skip the unreadable frame instead of retrying it forever
+            return Err(CaptureError::Read { path: path.clone(), message: e.to_string() });
+        }
         let frame = Frame {
             seq: self.delivered,
             timestamp,
@@ -136,5 +137,40 @@ impl FrameSource for RecordedSource {
             if self.realtime { "real time" } else { "as fast as possible" },
             if self.looping { ", looping" } else { "" }
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unreadable_frame_is_skipped_and_timestamps_stay_monotonic() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::create_dir_all(dir.path().join("img1")).expect("mkdir");
+        std::fs::write(dir.path().join("seqinfo.ini"), "[Sequence]\nframeRate=10\nimExt=.jpg\n").expect("ini");
+        let img = image::GrayImage::from_pixel(4, 4, image::Luma([9]));
+        img.save(dir.path().join("img1/000001.jpg")).expect("save");
+        img.save(dir.path().join("img1/000003.jpg")).expect("save");
+        // A directory named like a frame cannot be read as a file.
+        std::fs::create_dir(dir.path().join("img1/000002.jpg")).expect("mkdir");
+        let mut s = RecordedSource::open(dir.path(), false, true).expect("open");
+        assert_eq!((s.len(), s.fps()), (3, 10.0));
+        let a = s.next_frame(Vec::new()).expect("frame 1");
+        assert!(matches!(s.next_frame(Vec::new()), Err(CaptureError::Read { .. })));
+        let c = s.next_frame(Vec::new()).expect("frame 3");
+        let d = s.next_frame(Vec::new()).expect("loops to frame 1");
+        assert_eq!((a.seq, c.seq, d.seq), (0, 2, 3));
+        assert!(a.timestamp.get() < c.timestamp.get() && c.timestamp.get() < d.timestamp.get());
+        assert_eq!((d.width, d.height), (4, 4));
+        let mut once = RecordedSource::open(dir.path(), false, false).expect("open");
+        for _ in 0..3 {
+            let _ = once.next_frame(Vec::new());
+        }
+        assert!(matches!(once.next_frame(Vec::new()), Err(CaptureError::End)));
+        assert!(matches!(
+            RecordedSource::open(&dir.path().join("nope"), false, false),
+            Err(CaptureError::NotFound { .. })
+        ));
     }
 }
