@@ -178,6 +178,10 @@ pub trait FrameSource: Send {
     fn paced(&self) -> bool {
         true
     }
+    /// Frames lost before they reached us (V4L2: gaps in the driver's sequence numbers).
+    fn source_dropped(&self) -> u64 {
+        0
+    }
 }
 
 /// Exponential backoff between `min` and `max`, doubling after each failure, reset on success.

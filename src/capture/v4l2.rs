@@ -36,6 +36,9 @@ pub struct V4l2Source {
     cfg: SourceConfig,
     open: Option<Open>,
     seq: u64,
+    /// Driver sequence number of the last frame since (re)open, to count frames the driver dropped.
+    last_kernel_seq: Option<u32>,
+    kernel_dropped: u64,
 }
 
 impl std::fmt::Debug for V4l2Source {
@@ -47,7 +50,7 @@ impl std::fmt::Debug for V4l2Source {
 impl V4l2Source {
     /// A camera source for `cfg.path`; nothing is opened until [`FrameSource::reopen`].
     pub fn new(cfg: SourceConfig) -> Self {
-        Self { cfg, open: None, seq: 0 }
+        Self { cfg, open: None, seq: 0, last_kernel_seq: None, kernel_dropped: 0 }
     }
 
     fn open_device(&self) -> Result<Open, CaptureError> {
@@ -114,6 +117,9 @@ impl FrameSource for V4l2Source {
                 let ts = Seconds(meta.timestamp.sec as f64 + meta.timestamp.usec as f64 * 1e-6);
                 data.clear();
                 data.extend_from_slice(&buf[..used]);
+                if let Some(last) = self.last_kernel_seq.replace(meta.sequence) {
+                    self.kernel_dropped += u64::from(meta.sequence.wrapping_sub(last).saturating_sub(1));
+                }
                 Ok(Frame {
                     seq: self.seq,
                     timestamp: ts,
@@ -138,8 +144,13 @@ impl FrameSource for V4l2Source {
 
     fn reopen(&mut self) -> Result<(), CaptureError> {
         self.open = None;
+        self.last_kernel_seq = None; // the driver restarts its sequence numbers
         self.open = Some(self.open_device()?);
         Ok(())
+    }
+
+    fn source_dropped(&self) -> u64 {
+        self.kernel_dropped
     }
 
     fn describe(&self) -> String {

@@ -18,7 +18,7 @@
 //! | 12 | heartbeat (increments every update, wraps) |
 //! | 13-14 | uptime, s (uint32) |
 //! | 15 | camera frames/s x10 |
-//! | 16 | dropped frames (wrapping) |
+//! | 16 | dropped frames: queue drops + driver sequence gaps (wrapping) |
 //! | 17 | feeding recommended (0/1) |
 //! | 18 | version major |
 //! | 19 | version minor |

@@ -155,7 +155,7 @@ fn capture_loop(source: &mut Box<dyn FrameSource>, queue: &FrameQueue, shared: &
                         f = back;
                     }
                 }
-                let dropped = queue.stats().dropped;
+                let dropped = queue.stats().dropped + source.source_dropped();
                 window_frames += 1;
                 let elapsed = now.saturating_duration_since(window_start).as_secs_f64();
                 shared.with_health(|h| {
