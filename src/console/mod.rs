@@ -148,6 +148,12 @@ const HELP: &str = "commands (case-insensitive, read-only):
   config          the configuration file in use";
 
 impl Session {
+    /// The partly typed line as echoed so far (to redraw it after a streamed line), if any.
+    pub fn partial_echo(&self) -> Option<&str> {
+        (self.echo && !self.reader.overflow && !self.reader.binary && !self.reader.buf.is_empty())
+            .then_some(self.reader.buf.as_str())
+    }
+
     /// Feeds received bytes; appends echo and replies to `out`, in order.
     pub fn feed(&mut self, bytes: &[u8], shared: &Shared, out: &mut String) {
         for &b in bytes {
@@ -342,8 +348,16 @@ pub fn serve(port: &mut dyn serialport::SerialPort, shared: &Shared, echo: bool)
         }
         let hb = shared.bank.block()[12];
         if session.stream && hb != last_hb {
+            // Do not split what the technician is typing: new line, the update, then redraw the input.
+            let partial = session.partial_echo().map(str::to_owned);
+            if partial.is_some() {
+                out.push_str("\r\n");
+            }
             out.push_str(&activity_line(shared));
             out.push_str("\r\n");
+            if let Some(p) = partial {
+                out.push_str(&p);
+            }
         }
         last_hb = hb;
         if !out.is_empty() {
@@ -438,6 +452,19 @@ mod tests {
         sess.feed(b"vex\x7frsion\r\nhelp\x00\r\n", &s, &mut out);
         assert!(out.starts_with("vex\x08 \x08rsion\r\nfme "), "{out:?}");
         assert!(out.contains("OK\r\nhelp\r\nERR binary input ignored\r\n"), "{out:?}");
+    }
+
+    #[test]
+    fn partial_input_is_available_for_redraw() {
+        let s = shared();
+        let mut sess = Session { echo: true, ..Session::default() };
+        let mut out = String::new();
+        sess.feed(b"stat", &s, &mut out);
+        assert_eq!(sess.partial_echo(), Some("stat"));
+        sess.feed(b"us\r", &s, &mut out);
+        assert_eq!(sess.partial_echo(), None);
+        sess.feed(b"\x01", &s, &mut out);
+        assert_eq!(sess.partial_echo(), None, "binary input is not redrawn");
     }
 
     #[test]
