@@ -7,6 +7,7 @@ DEMO_OUT ?= target/demo
 
 .PHONY: all setup build test lint fmt clippy demo bench bench-synth clean
 .PHONY: all setup build test lint fmt clippy demo bench bench-core clean
+.PHONY: all setup build test lint fmt clippy demo bench clean demo-run bench-daemon
 
 all: build
 
@@ -32,6 +33,7 @@ lint: setup
 demo: build
 	$(BIN) synth --preset swarm --fish 20 --frames 150 --seed 7 --out $(DEMO_OUT)/swarm --force
 	@echo "demo: synthetic swarm sequence written to $(DEMO_OUT)/swarm"
+	$(MAKE) --no-print-directory demo-run
 
 bench: build
 	bash scripts/bench.sh
@@ -41,6 +43,16 @@ bench-synth: setup
 # Per-frame cost of post-processing + motion (issue 3); a benchmark, not a test.
 bench-core:
 	$(CARGO) bench --locked --bench core
+# `fme run` on a recording (default: the demo sequence) with a Modbus TCP server on 127.0.0.1:5020 and a
+# live one-line view; stops after DEMO_FRAMES frames. Read it with mbpoll (see README).
+DEMO_SEQ ?= $(DEMO_OUT)/swarm
+DEMO_FRAMES ?= 450
+demo-run: build
+	$(BIN) run --config config/fme.toml --source $(DEMO_SEQ) --modbus-listen 127.0.0.1:5020 --live --max-frames $(DEMO_FRAMES)
+
+# Daemon edges: real-time replay (drops, latency, CPU, RSS) and a long as-fast-as-possible run.
+bench-daemon: setup
+	$(CARGO) bench --locked --bench daemon_replay
 
 clean:
 	$(CARGO) clean

@@ -1,10 +1,135 @@
 //! `fme run`: Run the edge daemon: camera or recording in, PLC and serial out.
 
+use crate::capture::{CaptureError, FrameSource, RecordedSource, V4l2Source};
+use crate::cli::UsageError;
+use crate::config::{Config, ConfigError, ModbusMode};
+use crate::service::{self, Daemon, RunOptions};
+use anyhow::Context as _;
+use std::path::PathBuf;
+
 /// Arguments of `fme run`.
 #[derive(Debug, clap::Args)]
-pub struct RunArgs {}
+pub struct RunArgs {
+    /// Configuration file (TOML; see config/fme.toml for every key).
+    #[arg(long, short)]
+    pub config: PathBuf,
+    /// Frame source, overriding `source.path`: a V4L2 device (/dev/videoN) or a MOTChallenge sequence directory.
+    #[arg(long)]
+    pub source: Option<PathBuf>,
+    /// Serve Modbus TCP on HOST:PORT, overriding `output.modbus.mode` and `output.modbus.listen`.
+    #[arg(long)]
+    pub modbus_listen: Option<String>,
+    /// Recordings: replay as fast as possible instead of at the sequence's frame rate.
+    #[arg(long)]
+    pub fast: bool,
+    /// Recordings: stop at the end instead of looping.
+    #[arg(long)]
+    pub no_loop: bool,
+    /// Stop after this many processed frames (benchmarks).
+    #[arg(long)]
+    pub max_frames: Option<u64>,
+    /// Print a live one-line view of the activity index on stderr.
+    #[arg(long)]
+    pub live: bool,
+}
+
+fn usage(e: ConfigError) -> anyhow::Error {
+    anyhow::Error::new(UsageError(e.to_string()))
+}
+
+/// Loads the config and applies the command-line overrides (re-validated, errors name the flag).
+pub fn effective_config(args: &RunArgs) -> anyhow::Result<(Config, String)> {
+    let text = std::fs::read_to_string(&args.config)
+        .map_err(|e| UsageError(format!("cannot read config {}: {e}", args.config.display())))?;
+    let mut cfg = Config::parse(&text, &args.config).map_err(usage)?;
+    if let Some(s) = &args.source {
+        cfg.source.path = s.clone();
+    }
+    if let Some(l) = &args.modbus_listen {
+        if !crate::config::is_host_port(l) {
+            return Err(UsageError(format!("--modbus-listen: must be HOST:PORT, got {l:?}")).into());
+        }
+        cfg.output.modbus.mode = ModbusMode::TcpServer;
+        cfg.output.modbus.listen = l.clone();
+    }
+    if args.fast {
+        cfg.source.realtime = false;
+    }
+    if args.no_loop {
+        cfg.source.looping = false;
+    }
+    if args.live && cfg.service.live_view_s == 0.0 {
+        cfg.service.live_view_s = 0.5;
+    }
+    if let Err((key, msg)) = cfg.validate() {
+        return Err(UsageError(format!("after command-line overrides: key `{key}`: {msg}")).into());
+    }
+    Ok((cfg, text))
+}
+
+/// Opens the frame source. A missing camera is not fatal (it is retried with backoff and reported
+/// in the status registers: cameras enumerate late after power-up); a missing recording is.
+fn open_source(cfg: &Config) -> anyhow::Result<Box<dyn FrameSource>> {
+    let path = &cfg.source.path;
+    if path.starts_with("/dev") {
+        let mut cam = V4l2Source::new(cfg.source.clone());
+        if let Err(e) = cam.reopen() {
+            tracing::error!("camera {}: {e}; retrying with backoff (status bit 1 clear, fault code 1)", path.display());
+        }
+        return Ok(Box::new(cam));
+    }
+    match RecordedSource::open(path, cfg.source.realtime, cfg.source.looping) {
+        Ok(s) => Ok(Box::new(s)),
+        Err(e @ CaptureError::NotFound { .. }) => Err(UsageError(format!("source.path / --source: {e}")).into()),
+        Err(e) => Err(anyhow::Error::new(e).context("source.path / --source")),
+    }
+}
+
+/// Reads VmRSS and VmHWM (kB) from /proc/self/status.
+pub fn memory_kb() -> Option<(u64, u64)> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let get = |k: &str| s.lines().find(|l| l.starts_with(k))?.split_whitespace().nth(1)?.parse::<u64>().ok();
+    Some((get("VmRSS:")?, get("VmHWM:")?))
+}
 
 /// Runs `fme run`.
-pub fn run(_args: RunArgs) -> anyhow::Result<()> {
-    anyhow::bail!("fme run is not implemented yet (issue 6)")
+pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    let (cfg, text) = effective_config(&args)?;
+    let source = open_source(&cfg)?;
+    let pipeline = service::build_pipeline(&cfg)?;
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("tokio runtime")?;
+    let opts = RunOptions { max_frames: args.max_frames };
+    rt.block_on(async move {
+        let mut daemon = Daemon::start(cfg, text, source, pipeline, opts).await?;
+        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+            .context("installing the SIGTERM handler")?;
+        let reason = tokio::select! {
+            _ = term.recv() => "SIGTERM",
+            _ = tokio::signal::ctrl_c() => "SIGINT",
+            ok = daemon.finished() => if ok { "end of input" } else { "pipeline thread died" },
+        };
+        tracing::info!("{reason}: shutting down");
+        let shared = daemon.shared().clone();
+        let t0 = std::time::Instant::now();
+        daemon.shutdown().await;
+        let h = shared.health();
+        let (rss, hwm) = memory_kb().unwrap_or((0, 0));
+        eprintln!(
+            "\nfme run: {} frames captured, {} processed, {} dropped, {} updates, latency p50 {} ms p99 {} ms max {:.1} ms, rss {} kB (peak {} kB), shutdown {} ms",
+            h.frames_captured,
+            h.frames_processed,
+            h.frames_dropped,
+            h.updates,
+            h.latency.quantile_ms(0.5).map_or("n/a".into(), |v| format!("{v:.0}")),
+            h.latency.quantile_ms(0.99).map_or("n/a".into(), |v| format!("{v:.0}")),
+            h.latency.max_ms(),
+            rss,
+            hwm,
+            t0.elapsed().as_millis()
+        );
+        if reason == "pipeline thread died" {
+            anyhow::bail!("the pipeline thread died; exiting with an error so that the service manager restarts fme");
+        }
+        Ok::<(), anyhow::Error>(())
+    })
 }

@@ -1,1 +1,474 @@
-//! The serial field-diagnostics console (line based, read-only).
+//! The serial field-diagnostics console (line based, case-insensitive, read-only).
+//!
+//! Works with picocom/screen at 115200 baud. Every reply ends with a line `OK` or `ERR <reason>`, so
+//! scripts can parse it. Garbage, over-long lines and binary noise get an `ERR` line and never stop
+//! the daemon. Commands: `help`, `status`, `version`, `activity`, `tracks`, `calib`, `regs`,
+//! `counters`, `log [n]`, `stream on|off`, `config`.
+
+use crate::output::registers::{self, BLOCK_LEN, status};
+use crate::service::health::Shared;
+use std::fmt::Write as _;
+use std::time::Duration;
+
+/// Longest accepted command line, characters.
+pub const MAX_LINE: usize = 80;
+
+/// One event from the [`LineReader`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LineEvent {
+    /// A complete printable line (trimmed).
+    Line(String),
+    /// The line exceeded [`MAX_LINE`]; the rest of it is discarded.
+    TooLong,
+    /// The line contained non-printable bytes.
+    Binary,
+}
+
+/// Assembles lines from raw serial bytes (CR, LF or CRLF terminated) with a bounded buffer.
+#[derive(Debug, Default)]
+pub struct LineReader {
+    buf: String,
+    overflow: bool,
+    binary: bool,
+    last_cr: bool,
+}
+
+impl LineReader {
+    /// Feeds bytes; calls `on_event` for each finished line.
+    pub fn feed(&mut self, bytes: &[u8], mut on_event: impl FnMut(LineEvent)) {
+        for &b in bytes {
+            let was_cr = std::mem::replace(&mut self.last_cr, b == b'\r');
+            match b {
+                b'\n' if was_cr => {} // CRLF: the CR already ended the line
+                b'\r' | b'\n' => {
+                    let ev = if self.overflow {
+                        None // already reported when it overflowed
+                    } else if self.binary {
+                        Some(LineEvent::Binary)
+                    } else {
+                        let l = self.buf.trim();
+                        (!l.is_empty()).then(|| LineEvent::Line(l.to_string()))
+                    };
+                    self.buf.clear();
+                    self.overflow = false;
+                    self.binary = false;
+                    if let Some(ev) = ev {
+                        on_event(ev);
+                    }
+                }
+                0x08 | 0x7f => {
+                    self.buf.pop(); // backspace/delete from a terminal
+                }
+                _ if self.overflow => {}
+                _ => {
+                    if !(b == b'\t' || (0x20..0x7f).contains(&b)) {
+                        self.binary = true;
+                    } else {
+                        self.buf.push(b as char);
+                    }
+                    if self.buf.len() > MAX_LINE {
+                        self.overflow = true;
+                        self.buf.clear();
+                        on_event(LineEvent::TooLong);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A console session: line assembly, echo and the `stream` flag.
+#[derive(Debug, Default)]
+pub struct Session {
+    reader: LineReader,
+    /// Whether `stream on` is active.
+    pub stream: bool,
+    /// Echo typed characters (terminals like picocom do not echo locally).
+    pub echo: bool,
+    echo_cr: bool,
+}
+
+fn status_words(bits: u16) -> String {
+    let names = [
+        (status::RUNNING, "running"),
+        (status::CAMERA_OK, "camera-ok"),
+        (status::DETECTOR_OK, "detector-ok"),
+        (status::DEPTH_CALIBRATED, "depth-calibrated"),
+        (status::STALE, "stale"),
+        (status::PLC_LINK_OK, "plc-link-ok"),
+        (status::TOO_FEW_FISH, "too-few-fish"),
+    ];
+    let v: Vec<&str> = names.iter().filter(|(b, _)| bits & b != 0).map(|(_, n)| *n).collect();
+    if v.is_empty() { "-".into() } else { v.join(" ") }
+}
+
+fn fault_name(code: u16) -> &'static str {
+    match code {
+        0 => "none",
+        1 => "camera lost or stalled",
+        2 => "detector failed",
+        3 => "depth failed",
+        4 => "pipeline stalled",
+        5 => "plc link down",
+        6 => "stopped",
+        _ => "unknown",
+    }
+}
+
+/// One-line activity summary (console `activity`, `stream`, the live view).
+pub fn activity_line(shared: &Shared) -> String {
+    let r = shared.bank.block();
+    let h = shared.health();
+    match h.last_sample {
+        Some(s) => format!(
+            "activity {:.3} m/s ({:.2} BL/s) smoothed {:.3} m/s ±{:.3} fish {} hb {} {}",
+            s.mean.get(),
+            s.mean_body_lengths,
+            s.smoothed.get(),
+            s.ci95_half.get(),
+            s.fish,
+            r[12],
+            status_words(r[10])
+        ),
+        None => format!("activity n/a hb {} {}", r[12], status_words(r[10])),
+    }
+}
+
+const HELP: &str = "commands (case-insensitive, read-only):
+  help            this list
+  status          running state, status bits, fault, source, uptime
+  version         fme version and register-map version
+  activity        last activity sample
+  tracks          confirmed tracks
+  calib           metric depth fit: scale/shift, residual, visible references
+  regs            input registers 0-23 (holding registers mirror them)
+  counters        frames, drops, errors, reconnects, modbus, latency
+  log [n]         last n log lines (default 10)
+  stream on|off   print one activity line per update
+  config          the configuration file in use";
+
+impl Session {
+    /// The partly typed line as echoed so far (to redraw it after a streamed line), if any.
+    pub fn partial_echo(&self) -> Option<&str> {
+        (self.echo && !self.reader.overflow && !self.reader.binary && !self.reader.buf.is_empty())
+            .then_some(self.reader.buf.as_str())
+    }
+
+    /// Feeds received bytes; appends echo and replies to `out`, in order.
+    pub fn feed(&mut self, bytes: &[u8], shared: &Shared, out: &mut String) {
+        for &b in bytes {
+            if self.echo {
+                let was_cr = std::mem::replace(&mut self.echo_cr, b == b'\r');
+                match b {
+                    b'\n' if was_cr => {}
+                    b'\r' | b'\n' => out.push_str("\r\n"),
+                    0x08 | 0x7f => out.push_str("\x08 \x08"),
+                    // A flood is not echoed past the line limit; binary noise is not echoed at all.
+                    b'\t' | 0x20..=0x7e if !self.reader.overflow && self.reader.buf.len() < MAX_LINE => {
+                        out.push(b as char)
+                    }
+                    _ => {}
+                }
+            }
+            let mut event = None;
+            self.reader.feed(std::slice::from_ref(&b), |e| event = Some(e));
+            let Some(e) = event else { continue };
+            match e {
+                LineEvent::Line(l) => self.command(&l, shared, out),
+                LineEvent::TooLong => {
+                    let _ = write!(out, "ERR line too long (max {MAX_LINE} characters)\r\n");
+                }
+                LineEvent::Binary => out.push_str("ERR binary input ignored\r\n"),
+            }
+        }
+    }
+
+    /// Executes one command line.
+    pub fn command(&mut self, line: &str, shared: &Shared, out: &mut String) {
+        let lower = line.to_ascii_lowercase();
+        let mut words = lower.split_whitespace();
+        let cmd = words.next().unwrap_or("");
+        let arg = words.next();
+        let extra = words.next();
+        let mut body = String::new();
+        let result: Result<(), String> = match (cmd, arg, extra) {
+            (_, _, Some(_)) => Err(format!("too many arguments for `{cmd}`")),
+            ("help" | "?", None, _) => {
+                body.push_str(HELP);
+                Ok(())
+            }
+            ("status", None, _) => {
+                let r = shared.bank.block();
+                let h = shared.health();
+                let _ = write!(
+                    body,
+                    "state {}\nstatus 0x{:04x} {}\nfault {} ({})\nsource {}\nuptime {} s\nfeeding-recommended {}",
+                    if shared.stopping() { "stopping" } else { "running" },
+                    r[10],
+                    status_words(r[10]),
+                    r[11],
+                    fault_name(r[11]),
+                    h.source,
+                    h.started.elapsed().as_secs(),
+                    r[17]
+                );
+                Ok(())
+            }
+            ("version", None, _) => {
+                let (maj, min) = registers::version();
+                let _ =
+                    write!(body, "fme {} (register map {maj}.{min}, {BLOCK_LEN} registers)", env!("CARGO_PKG_VERSION"));
+                Ok(())
+            }
+            ("activity", None, _) => {
+                body.push_str(&activity_line(shared));
+                Ok(())
+            }
+            ("tracks", None, _) => {
+                let h = shared.health();
+                let _ = write!(body, "tracks {}", h.stage.tracks);
+                if !h.tracks_text.is_empty() {
+                    body.push('\n');
+                    body.push_str(h.tracks_text.trim_end());
+                }
+                Ok(())
+            }
+            ("calib", None, _) => {
+                let c = shared.health().calib;
+                if c.calibrated {
+                    let _ = write!(
+                        body,
+                        "scale {:.6}\nshift {:.6}\nresidual {:.3} m\nreferences-visible {}",
+                        c.scale, c.shift, c.residual_m, c.references_visible
+                    );
+                } else {
+                    let _ = write!(body, "not calibrated (references-visible {})", c.references_visible);
+                }
+                Ok(())
+            }
+            ("regs", None, _) => {
+                let r = shared.bank.block();
+                for (i, v) in r.iter().enumerate() {
+                    let _ = write!(body, "{i:2}: {v:5} 0x{v:04x}{}", if i % 4 == 3 { "\n" } else { "   " });
+                }
+                let w = shared.bank.writable();
+                let _ = write!(body, "hr100-103 (plc writable): {} {} {} {}", w[0], w[1], w[2], w[3]);
+                Ok(())
+            }
+            ("counters", None, _) => {
+                let h = shared.health();
+                let m = shared.bank.counters();
+                let q = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.0} ms"));
+                let _ = write!(
+                    body,
+                    "frames-captured {}\nframes-processed {}\nframes-dropped {}\ncamera-fps {:.1}\ncapture-errors {}\nreconnects {}\npipeline-errors {}\nupdates {}\nmodbus-requests {}\nmodbus-exceptions {}\nplc-writes {}\nplc-failures {}\nlatency-p50 {}\nlatency-p99 {}",
+                    h.frames_captured,
+                    h.frames_processed,
+                    h.frames_dropped,
+                    h.camera_fps,
+                    h.capture_errors,
+                    h.reconnects,
+                    h.pipeline_errors,
+                    h.updates,
+                    m.requests,
+                    m.exceptions,
+                    m.client_writes,
+                    m.client_failures,
+                    q(h.latency.quantile_ms(0.5)),
+                    q(h.latency.quantile_ms(0.99)),
+                );
+                Ok(())
+            }
+            ("log", n, _) => match n.map(str::parse::<usize>) {
+                None => {
+                    body.push_str(&shared.last_logs(10).join("\n"));
+                    Ok(())
+                }
+                Some(Ok(n)) if (1..=10_000).contains(&n) => {
+                    body.push_str(&shared.last_logs(n).join("\n"));
+                    Ok(())
+                }
+                Some(_) => Err("usage: log [n] with n from 1 to 10000".into()),
+            },
+            ("stream", Some("on"), _) => {
+                self.stream = true;
+                Ok(())
+            }
+            ("stream", Some("off"), _) => {
+                self.stream = false;
+                Ok(())
+            }
+            ("stream", _, _) => Err("usage: stream on|off".into()),
+            ("config", None, _) => {
+                body.push_str(shared.config_text.trim_end());
+                if body.is_empty() {
+                    body.push_str("(built-in defaults)");
+                }
+                Ok(())
+            }
+            (
+                "help" | "?" | "status" | "version" | "activity" | "tracks" | "calib" | "regs" | "counters" | "config",
+                Some(_),
+                _,
+            ) => Err(format!("`{cmd}` takes no argument")),
+            _ => {
+                // Echo at most 20 printable characters of what was typed.
+                let shown: String = line.chars().take(20).collect();
+                Err(format!("unknown command `{shown}` (try help)"))
+            }
+        };
+        for l in body.lines() {
+            out.push_str(l);
+            out.push_str("\r\n");
+        }
+        match result {
+            Ok(()) => out.push_str("OK\r\n"),
+            Err(e) => {
+                let _ = write!(out, "ERR {e}\r\n");
+            }
+        }
+    }
+}
+
+/// Serves the console on an open port until a stop is requested. I/O errors end the session (the
+/// caller reopens the device).
+pub fn serve(port: &mut dyn serialport::SerialPort, shared: &Shared, echo: bool) -> std::io::Result<()> {
+    let mut session = Session { echo, ..Session::default() };
+    let mut buf = [0u8; 256];
+    let mut out = String::with_capacity(1024);
+    let mut last_hb = shared.bank.block()[12];
+    port.write_all(b"fme console ready (type help)\r\n")?;
+    while !shared.stopping() {
+        match port.read(&mut buf) {
+            Ok(0) => {}
+            Ok(n) => session.feed(&buf[..n], shared, &mut out),
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut || e.kind() == std::io::ErrorKind::WouldBlock => {}
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+        let hb = shared.bank.block()[12];
+        if session.stream && hb != last_hb {
+            // Do not split what the technician is typing: new line, the update, then redraw the input.
+            let partial = session.partial_echo().map(str::to_owned);
+            if partial.is_some() {
+                out.push_str("\r\n");
+            }
+            out.push_str(&activity_line(shared));
+            out.push_str("\r\n");
+            if let Some(p) = partial {
+                out.push_str(&p);
+            }
+        }
+        last_hb = hb;
+        if !out.is_empty() {
+            port.write_all(out.as_bytes())?;
+            port.flush()?;
+            out.clear();
+        }
+    }
+    Ok(())
+}
+
+/// Opens `device` and serves the console, reopening with backoff after errors, until a stop.
+pub fn run_on_device(device: &str, baud: u32, echo: bool, shared: &Shared) {
+    let mut backoff = crate::capture::Backoff::new(Duration::from_millis(500), Duration::from_secs(30));
+    while !shared.stopping() {
+        match serialport::new(device, baud).timeout(Duration::from_millis(100)).open() {
+            Ok(mut port) => {
+                backoff.reset();
+                shared.log(tracing::Level::INFO, format!("console on {device} at {baud} baud"));
+                if let Err(e) = serve(port.as_mut(), shared, echo) {
+                    shared.log(tracing::Level::WARN, format!("console {device}: {e}"));
+                }
+            }
+            Err(e) => shared.log(tracing::Level::WARN, format!("console {device}: {e}")),
+        }
+        let d = backoff.next_delay();
+        let end = std::time::Instant::now() + d;
+        while std::time::Instant::now() < end && !shared.stopping() {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::output::bank::RegisterBank;
+    use std::sync::Arc;
+
+    fn shared() -> Shared {
+        Shared::new(Arc::new(RegisterBank::new()), "[source]\npath = \"x\"\n".into(), 50)
+    }
+
+    fn run(input: &[u8]) -> String {
+        let s = shared();
+        let mut sess = Session::default();
+        let mut out = String::new();
+        sess.feed(input, &s, &mut out);
+        out
+    }
+
+    #[test]
+    fn commands_case_insensitive() {
+        let out = run(b"HeLp\r\nVERSION\n");
+        assert!(out.contains("stream on|off"));
+        assert!(out.contains(concat!("fme ", env!("CARGO_PKG_VERSION"))));
+        assert_eq!(out.matches("OK\r\n").count(), 2);
+    }
+
+    #[test]
+    fn errors_for_garbage() {
+        assert!(run(b"frobnicate\n").starts_with("ERR unknown command `frobnicate`"));
+        assert!(run(b"status now\n").starts_with("ERR `status` takes no argument"));
+        assert!(run(b"stream maybe\n").starts_with("ERR usage: stream on|off"));
+        assert!(run(b"log -3\n").starts_with("ERR usage: log"));
+        assert_eq!(run(b"\x00\x01\xff\n"), "ERR binary input ignored\r\n");
+        let long = vec![b'a'; 500];
+        let out = run(&[long.as_slice(), b"\nversion\n"].concat());
+        assert!(out.starts_with("ERR line too long"), "{out}");
+        assert_eq!(out.matches("ERR").count(), 1);
+        assert!(out.ends_with("OK\r\n"));
+        assert_eq!(run(b"\r\n\r\n   \n"), "");
+    }
+
+    #[test]
+    fn stream_and_config() {
+        let s = shared();
+        let mut sess = Session::default();
+        let mut out = String::new();
+        sess.feed(b"stream on\n", &s, &mut out);
+        assert!(sess.stream);
+        sess.feed(b"Stream OFF\nconfig\n", &s, &mut out);
+        assert!(!sess.stream);
+        assert!(out.contains("path = \"x\""));
+    }
+
+    #[test]
+    fn echo_in_order_with_replies() {
+        let s = shared();
+        let mut sess = Session { echo: true, ..Session::default() };
+        let mut out = String::new();
+        sess.feed(b"vex\x7frsion\r\nhelp\x00\r\n", &s, &mut out);
+        assert!(out.starts_with("vex\x08 \x08rsion\r\nfme "), "{out:?}");
+        assert!(out.contains("OK\r\nhelp\r\nERR binary input ignored\r\n"), "{out:?}");
+    }
+
+    #[test]
+    fn partial_input_is_available_for_redraw() {
+        let s = shared();
+        let mut sess = Session { echo: true, ..Session::default() };
+        let mut out = String::new();
+        sess.feed(b"stat", &s, &mut out);
+        assert_eq!(sess.partial_echo(), Some("stat"));
+        sess.feed(b"us\r", &s, &mut out);
+        assert_eq!(sess.partial_echo(), None);
+        sess.feed(b"\x01", &s, &mut out);
+        assert_eq!(sess.partial_echo(), None, "binary input is not redrawn");
+    }
+
+    #[test]
+    fn backspace_and_crlf() {
+        assert!(run(b"versiom\x08n\r\n").contains("fme "));
+    }
+}

@@ -1,1 +1,10 @@
 //! Outputs to the farm: register map, Modbus TCP/RTU server and client, serial line, feeding rule.
+//!
+//! The register map ([`registers`]) and the feeding rule ([`feeding`]) are pure and tested without
+//! I/O; [`modbus`] and the serial line are the I/O edges around the shared [`bank::RegisterBank`].
+
+pub mod bank;
+pub mod feeding;
+pub mod modbus;
+pub mod registers;
+pub mod serial_line;

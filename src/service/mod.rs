@@ -1,1 +1,592 @@
 //! Wiring of `fme run`: threads, queues, health and status, watchdog, shutdown.
+//!
+//! ```text
+//! capture thread --Frame--> FrameQueue (drop oldest, count) --> pipeline thread (Pipeline::process)
+//!     -> Publisher (status bits, feeding rule, heartbeat) -> RegisterBank (watch: latest block)
+//!         -> Modbus TCP/RTU server tasks (PLC polls) | client task (FC16 per update) | serial line
+//!     -> Shared health <- console thread, keepalive task, live view
+//! ```
+//! The pipeline thread pings the systemd watchdog each loop turn (a stuck `Pipeline::process` stops
+//! the pings and systemd restarts the service); a camera outage does not (the loop keeps turning).
+//!
+//! **Integration point:** [`build_pipeline`] returns the pipeline `fme run` uses.
+
+pub mod health;
+pub mod pipeline;
+pub mod publish;
+
+use crate::capture::{Backoff, CaptureError, FrameQueue, FrameSource};
+use crate::config::{Config, ModbusMode};
+use crate::output::bank::RegisterBank;
+use crate::output::modbus::{self, ClientSettings, ClientTarget, ModbusError};
+use health::Shared;
+use pipeline::Pipeline;
+use publish::Publisher;
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tracing::Level;
+
+/// Errors starting the daemon (everything after start-up is logged and retried instead).
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceError {
+    /// A Modbus role could not start.
+    #[error(transparent)]
+    Modbus(#[from] ModbusError),
+    /// The frame source could not be opened.
+    #[error("source: {0}")]
+    Capture(#[from] CaptureError),
+    /// The pipeline could not be built.
+    #[error("pipeline: {0}")]
+    Pipeline(String),
+    /// A thread could not be spawned.
+    #[error("cannot spawn {what}: {source}")]
+    Spawn {
+        /// Which thread.
+        what: &'static str,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+}
+
+/// **Integration point.** Builds the pipeline for `cfg`. Today this is the [`pipeline::FrameDiffPipeline`]
+/// stand-in; at integration it builds detector + tracker + depth + post-processing + motion (paper
+/// eq. 1-5) from `cfg.detector`, `cfg.depth`, `cfg.tracker`, `cfg.postprocess`, `cfg.motion` and
+/// returns model / ONNX Runtime errors as [`ServiceError::Pipeline`] naming the config key.
+pub fn build_pipeline(cfg: &Config) -> Result<Box<dyn Pipeline>, ServiceError> {
+    tracing::warn!("using the frame-difference stand-in pipeline: values are NOT fish speeds (integration pending)");
+    Ok(Box::new(pipeline::FrameDiffPipeline::new(cfg.motion.smoothing_s, cfg.motion.body_length_m)))
+}
+
+/// Run-time options not in the config file.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RunOptions {
+    /// Stop after this many processed frames (benchmarks).
+    pub max_frames: Option<u64>,
+}
+
+/// A running daemon.
+pub struct Daemon {
+    cfg: Config,
+    shared: Arc<Shared>,
+    publisher: Arc<Mutex<Publisher>>,
+    modbus_addr: Option<SocketAddr>,
+    stop_tx: tokio::sync::watch::Sender<bool>,
+    server_stops: Vec<tokio::sync::oneshot::Sender<()>>,
+    server_tasks: Vec<tokio::task::JoinHandle<()>>,
+    client_task: Option<tokio::task::JoinHandle<()>>,
+    aux_tasks: Vec<tokio::task::JoinHandle<()>>,
+    pipeline_thread: Option<std::thread::JoinHandle<()>>,
+    other_threads: Vec<std::thread::JoinHandle<()>>,
+    finished: tokio::sync::watch::Receiver<bool>,
+    serial_tx: Option<std::sync::mpsc::SyncSender<String>>,
+}
+
+impl std::fmt::Debug for Daemon {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Daemon").field("modbus_addr", &self.modbus_addr).finish_non_exhaustive()
+    }
+}
+
+/// Sleeps `d` in small steps, returning early (true) when a stop is requested.
+fn sleep_unless_stopping(shared: &Shared, d: Duration) -> bool {
+    let end = Instant::now() + d;
+    while Instant::now() < end {
+        if shared.stopping() {
+            return true;
+        }
+        std::thread::sleep((end - Instant::now()).min(Duration::from_millis(50)));
+    }
+    shared.stopping()
+}
+
+/// The message of a caught panic.
+fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
+    let msg = p.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| p.downcast_ref::<String>().cloned());
+    format!("panicked: {}", msg.unwrap_or_else(|| "(no message)".into()))
+}
+
+/// Runs the capture loop, restarting it (after the reconnect backoff) if a source panics.
+fn capture_thread(mut source: Box<dyn FrameSource>, queue: Arc<FrameQueue>, shared: Arc<Shared>, backoff: Backoff) {
+    loop {
+        let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            capture_loop(&mut source, &queue, &shared, backoff);
+        }));
+        match run {
+            Ok(()) => return,
+            Err(p) => {
+                shared.with_health(|h| {
+                    h.camera_ok = false;
+                    h.capture_errors += 1;
+                });
+                shared.log(Level::ERROR, format!("capture {}; restarting capture", panic_text(&*p)));
+                let mut b = backoff;
+                if sleep_unless_stopping(&shared, b.next_delay()) {
+                    queue.close();
+                    return;
+                }
+                if let Err(e) = source.reopen() {
+                    shared.log(Level::WARN, format!("camera reconnect failed: {e}"));
+                }
+            }
+        }
+    }
+}
+
+fn capture_loop(source: &mut Box<dyn FrameSource>, queue: &FrameQueue, shared: &Shared, mut backoff: Backoff) {
+    let mut window_start = Instant::now();
+    let mut window_frames = 0u32;
+    let paced = source.paced();
+    while !shared.stopping() {
+        match source.next_frame(queue.take_buffer()) {
+            Ok(frame) => {
+                backoff.reset();
+                let now = frame.arrived;
+                if paced {
+                    if let Some(old) = queue.push(frame) {
+                        queue.recycle(old.data);
+                    }
+                } else {
+                    let mut f = frame;
+                    while let Err(back) = queue.push_wait(f, Duration::from_millis(100)) {
+                        if shared.stopping() || queue.is_closed() {
+                            break;
+                        }
+                        f = back;
+                    }
+                }
+                let dropped = queue.stats().dropped + source.source_dropped();
+                window_frames += 1;
+                let elapsed = now.saturating_duration_since(window_start).as_secs_f64();
+                shared.with_health(|h| {
+                    h.camera_ok = true;
+                    h.frames_captured += 1;
+                    h.frames_dropped = dropped;
+                    if elapsed >= 1.0 {
+                        h.camera_fps = f64::from(window_frames) / elapsed;
+                    }
+                });
+                if elapsed >= 1.0 {
+                    window_start = now;
+                    window_frames = 0;
+                }
+            }
+            Err(CaptureError::End) => {
+                shared.log(Level::INFO, format!("{}: end of recording", source.describe()));
+                break;
+            }
+            Err(e) => {
+                shared.with_health(|h| {
+                    h.camera_ok = false;
+                    h.camera_fps = 0.0;
+                    h.capture_errors += 1;
+                });
+                shared.log(Level::WARN, format!("camera: {e}"));
+                loop {
+                    let d = backoff.next_delay();
+                    if sleep_unless_stopping(shared, d) {
+                        break;
+                    }
+                    match source.reopen() {
+                        Ok(()) => {
+                            shared.with_health(|h| {
+                                h.reconnects += 1;
+                                h.source = source.describe();
+                            });
+                            shared.log(Level::INFO, format!("camera back: {}", source.describe()));
+                            window_start = Instant::now();
+                            window_frames = 0;
+                            break;
+                        }
+                        Err(e) => shared.log(Level::WARN, format!("camera reconnect failed: {e}")),
+                    }
+                }
+            }
+        }
+    }
+    queue.close();
+}
+
+struct PipelineCtx {
+    pipeline: Box<dyn Pipeline>,
+    queue: Arc<FrameQueue>,
+    shared: Arc<Shared>,
+    publisher: Arc<Mutex<Publisher>>,
+    serial_tx: Option<std::sync::mpsc::SyncSender<String>>,
+    output_period_s: f64,
+    max_frames: Option<u64>,
+    watchdog: Option<Duration>,
+    finished: tokio::sync::watch::Sender<bool>,
+}
+
+fn pipeline_loop(mut c: PipelineCtx) {
+    let mut next_out: Option<f64> = None;
+    let mut last_ping: Option<Instant> = None;
+    let mut processed = 0u64;
+    let mut errors = 0u64;
+    let mut tracks = String::with_capacity(1024);
+    while !c.shared.stopping() {
+        if let Some(wd) = c.watchdog
+            && last_ping.is_none_or(|t| t.elapsed() >= wd / 2)
+        {
+            let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
+            last_ping = Some(Instant::now());
+        }
+        let Some(frame) = c.queue.pop(Duration::from_millis(100)) else {
+            if c.queue.is_closed() && c.queue.is_empty() {
+                break;
+            }
+            continue;
+        };
+        // A panic in a stage on one bad frame must not end the pipeline: count it as an error.
+        let result = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| c.pipeline.process(&frame))) {
+            Ok(r) => r,
+            Err(p) => Err(pipeline::PipelineError::Stage { stage: "pipeline", message: panic_text(&*p) }),
+        };
+        let now = Instant::now();
+        processed += 1;
+        let mut due = false;
+        let ts = frame.timestamp.get();
+        let stage = c.pipeline.health();
+        let calib = c.pipeline.calib();
+        let sample = match result {
+            Ok(s) => s,
+            Err(e) => {
+                errors += 1;
+                // First error and then every 100th: a flood of bad frames must not flood the journal.
+                if errors == 1 || errors.is_multiple_of(100) {
+                    c.shared.log(Level::WARN, format!("pipeline error #{errors}: {e}"));
+                }
+                None
+            }
+        };
+        if sample.is_some() {
+            let next = next_out.get_or_insert(ts);
+            if ts + 1e-9 >= *next || ts < *next - 2.0 * c.output_period_s {
+                due = true;
+                // Next slot on the frame clock; resynchronise after gaps or a clock jump.
+                *next = if ts - *next > c.output_period_s || ts < *next - 2.0 * c.output_period_s {
+                    ts + c.output_period_s
+                } else {
+                    *next + c.output_period_s
+                };
+            }
+        }
+        if due {
+            tracks.clear();
+            let _ = c.pipeline.describe_tracks(&mut tracks, 64);
+        }
+        c.shared.with_health(|h| {
+            h.frames_processed = processed;
+            h.pipeline_errors = errors;
+            h.last_processed_at = Some(now);
+            h.stage = stage;
+            h.calib = calib;
+            if let Some(s) = sample {
+                h.last_sample = Some(s);
+                h.last_sample_at = Some(now);
+            }
+            if due {
+                std::mem::swap(&mut h.tracks_text, &mut tracks);
+            }
+        });
+        if due {
+            let mut p = c.publisher.lock().unwrap_or_else(|p| p.into_inner());
+            let line = p.publish(&c.shared, Instant::now(), false);
+            if let Some(tx) = &c.serial_tx {
+                let _ = tx.try_send(line.to_string()); // never wait on a slow logger
+            }
+            drop(p);
+            let ms = frame.arrived.elapsed().as_secs_f64() * 1000.0;
+            c.shared.with_health(|h| h.latency.record(ms));
+        }
+        c.queue.recycle(frame.data);
+        if c.max_frames.is_some_and(|m| processed >= m) {
+            c.shared.log(Level::INFO, format!("processed {processed} frames: stopping as asked"));
+            break;
+        }
+    }
+    let _ = c.finished.send(true);
+}
+
+fn serial_line_loop(device: String, baud: u32, rx: std::sync::mpsc::Receiver<String>, shared: Arc<Shared>) {
+    let mut port: Option<Box<dyn serialport::SerialPort>> = None;
+    let mut backoff = Backoff::new(Duration::from_millis(500), Duration::from_secs(30));
+    let mut retry_at = Instant::now();
+    loop {
+        let line = match rx.recv_timeout(Duration::from_millis(200)) {
+            Ok(l) => l,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) if shared.stopping() => return,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => continue,
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return,
+        };
+        if port.is_none() && Instant::now() >= retry_at {
+            match serialport::new(&device, baud).timeout(Duration::from_millis(200)).open() {
+                Ok(p) => {
+                    backoff.reset();
+                    port = Some(p);
+                }
+                Err(e) => {
+                    let d = backoff.next_delay();
+                    retry_at = Instant::now() + d;
+                    shared.log(Level::WARN, format!("serial line {device}: {e}; retry in {} ms", d.as_millis()));
+                }
+            }
+        }
+        if let Some(p) = port.as_mut()
+            && let Err(e) = p.write_all(line.as_bytes()).and_then(|()| p.flush())
+        {
+            shared.log(Level::WARN, format!("serial line {device}: write failed: {e}"));
+            port = None;
+        }
+    }
+}
+
+impl Daemon {
+    /// Starts every part of the daemon. Must be called inside a tokio runtime. Start-up errors (bind,
+    /// serial open of an RTU server) are returned; later failures are logged and retried.
+    pub async fn start(
+        cfg: Config,
+        config_text: String,
+        source: Box<dyn FrameSource>,
+        pipeline: Box<dyn Pipeline>,
+        opts: RunOptions,
+    ) -> Result<Self, ServiceError> {
+        let bank = Arc::new(RegisterBank::new());
+        let shared = Arc::new(Shared::new(bank.clone(), config_text, cfg.console.log_lines));
+        shared.with_health(|h| h.source = source.describe());
+        shared.log(Level::INFO, format!("fme {} starting on {}", env!("CARGO_PKG_VERSION"), source.describe()));
+        let publisher = Arc::new(Mutex::new(Publisher::new(&cfg)));
+        // Publish a first block at once so a PLC never reads all zeros from a running box.
+        let _ = publisher.lock().unwrap_or_else(|p| p.into_inner()).publish(&shared, Instant::now(), false);
+
+        let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+        let mut server_stops = Vec::new();
+        let mut server_tasks = Vec::new();
+        let mut client_task = None;
+        let m = &cfg.output.modbus;
+        let mut modbus_addr = None;
+        match m.mode {
+            ModbusMode::Off => {}
+            ModbusMode::TcpServer => {
+                let (listener, addr) = modbus::bind_tcp(&m.listen).await?;
+                modbus_addr = Some(addr);
+                let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+                server_stops.push(tx);
+                server_tasks.push(tokio::spawn(modbus::serve_tcp(listener, bank.clone(), async move {
+                    let _ = rx.await;
+                })));
+                shared.log(Level::INFO, format!("modbus tcp server on {addr}"));
+            }
+            ModbusMode::RtuServer => {
+                // A missing RS-485 adapter is retried with backoff, not fatal.
+                server_tasks.push(tokio::spawn(modbus::run_rtu_server(m.clone(), bank.clone(), stop_rx.clone())));
+                shared.log(Level::INFO, format!("modbus rtu server on {} unit {}", m.serial_device, m.unit_id));
+            }
+            ModbusMode::TcpClient | ModbusMode::RtuClient => {
+                let target = if m.mode == ModbusMode::TcpClient {
+                    ClientTarget::Tcp(m.peer.clone()) // resolved at each connect: DNS changes are picked up
+                } else {
+                    ClientTarget::Rtu(m.clone())
+                };
+                let settings = ClientSettings {
+                    target,
+                    unit_id: m.unit_id,
+                    base_address: m.base_address,
+                    timeout: Duration::from_millis(m.timeout_ms),
+                    backoff: Backoff::new(
+                        Duration::from_millis(m.reconnect_min_ms),
+                        Duration::from_millis(m.reconnect_max_ms),
+                    ),
+                };
+                client_task = Some(tokio::spawn(modbus::run_client(settings, bank.clone(), stop_rx.clone())));
+                shared.log(
+                    Level::INFO,
+                    format!(
+                        "modbus client ({:?}) to {}",
+                        m.mode,
+                        if m.mode == ModbusMode::TcpClient { &m.peer } else { &m.serial_device }
+                    ),
+                );
+            }
+        }
+
+        let mut other_threads = Vec::new();
+        let serial_tx = if cfg.output.serial.enabled {
+            let (tx, rx) = std::sync::mpsc::sync_channel::<String>(4);
+            let (dev, baud, sh) = (cfg.output.serial.device.clone(), cfg.output.serial.baud, shared.clone());
+            other_threads.push(
+                std::thread::Builder::new()
+                    .name("fme-serial-line".into())
+                    .spawn(move || serial_line_loop(dev, baud, rx, sh))
+                    .map_err(|source| ServiceError::Spawn { what: "serial line", source })?,
+            );
+            Some(tx)
+        } else {
+            None
+        };
+        if cfg.console.enabled {
+            let (dev, baud, echo, sh) =
+                (cfg.console.device.clone(), cfg.console.baud, cfg.console.echo, shared.clone());
+            other_threads.push(
+                std::thread::Builder::new()
+                    .name("fme-console".into())
+                    .spawn(move || crate::console::run_on_device(&dev, baud, echo, &sh))
+                    .map_err(|source| ServiceError::Spawn { what: "console", source })?,
+            );
+        }
+
+        let queue = Arc::new(FrameQueue::new(cfg.source.queue_frames));
+        let backoff = Backoff::new(
+            Duration::from_millis(cfg.source.reconnect_min_ms),
+            Duration::from_millis(cfg.source.reconnect_max_ms),
+        );
+        let (q, sh) = (queue.clone(), shared.clone());
+        other_threads.push(
+            std::thread::Builder::new()
+                .name("fme-capture".into())
+                .spawn(move || capture_thread(source, q, sh, backoff))
+                .map_err(|source| ServiceError::Spawn { what: "capture", source })?,
+        );
+        let watchdog = if cfg.service.systemd_notify { sd_notify::watchdog_enabled() } else { None };
+        let (finished_tx, finished) = tokio::sync::watch::channel(false);
+        let ctx = PipelineCtx {
+            pipeline,
+            queue,
+            shared: shared.clone(),
+            publisher: publisher.clone(),
+            serial_tx: serial_tx.clone(),
+            output_period_s: 1.0 / cfg.output.rate_hz,
+            max_frames: opts.max_frames,
+            watchdog,
+            finished: finished_tx,
+        };
+        let pipeline_thread = Some(
+            std::thread::Builder::new()
+                .name("fme-pipeline".into())
+                .spawn(move || pipeline_loop(ctx))
+                .map_err(|source| ServiceError::Spawn { what: "pipeline", source })?,
+        );
+
+        // Keepalive: with no samples (camera down, pipeline failing) the registers still update, so
+        // the PLC sees the heartbeat, the stale bit and the fault code.
+        let mut aux_tasks = Vec::new();
+        let period = Duration::from_secs_f64(1.0 / cfg.output.rate_hz);
+        let (sh, pb, stx) = (shared.clone(), publisher.clone(), serial_tx.clone());
+        aux_tasks.push(tokio::spawn(async move {
+            let mut tick = tokio::time::interval(period / 2);
+            loop {
+                tick.tick().await;
+                if sh.stopping() {
+                    return;
+                }
+                let mut p = pb.lock().unwrap_or_else(|p| p.into_inner());
+                if p.last_publish.is_none_or(|t| t.elapsed() >= period + period / 2) {
+                    let line = p.publish(&sh, Instant::now(), false);
+                    if let Some(tx) = &stx {
+                        let _ = tx.try_send(line.to_string());
+                    }
+                }
+            }
+        }));
+        if cfg.service.live_view_s > 0.0 {
+            let sh = shared.clone();
+            let every = Duration::from_secs_f64(cfg.service.live_view_s);
+            aux_tasks.push(tokio::spawn(async move {
+                let mut tick = tokio::time::interval(every);
+                loop {
+                    tick.tick().await;
+                    if sh.stopping() {
+                        return;
+                    }
+                    eprint!("\r{}   ", crate::console::activity_line(&sh));
+                }
+            }));
+        }
+        if cfg.service.systemd_notify {
+            let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready, sd_notify::NotifyState::Status("running")]);
+        }
+        Ok(Self {
+            cfg,
+            shared,
+            publisher,
+            modbus_addr,
+            stop_tx,
+            server_stops,
+            server_tasks,
+            client_task,
+            aux_tasks,
+            pipeline_thread,
+            other_threads,
+            finished,
+            serial_tx,
+        })
+    }
+
+    /// Shared state (health, registers, logs).
+    pub fn shared(&self) -> &Arc<Shared> {
+        &self.shared
+    }
+
+    /// The bound Modbus TCP server address (useful with port 0).
+    pub fn modbus_addr(&self) -> Option<SocketAddr> {
+        self.modbus_addr
+    }
+
+    /// Resolves when the pipeline thread ends by itself: `true` at the end of a non-looping recording
+    /// or after `max_frames`; `false` if the thread died (the caller should exit non-zero so that
+    /// systemd's `Restart=on-failure` restarts the service).
+    pub async fn finished(&mut self) -> bool {
+        self.finished.wait_for(|f| *f).await.is_ok()
+    }
+
+    /// Clean shutdown (SIGTERM/SIGINT): writes status "stopped" to the registers first (running bit
+    /// cleared, fault code 6, feeding off), lets clients write it and polling PLCs read it for
+    /// `service.stop_grace_ms`, then stops everything. Bounded to well under 2 s.
+    pub async fn shutdown(mut self) {
+        let t0 = Instant::now();
+        if self.cfg.service.systemd_notify {
+            let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
+        }
+        self.shared.request_stop();
+        {
+            let mut p = self.publisher.lock().unwrap_or_else(|p| p.into_inner());
+            let line = p.publish(&self.shared, Instant::now(), true);
+            if let Some(tx) = &self.serial_tx {
+                let _ = tx.try_send(line.to_string());
+            }
+        }
+        let _ = self.stop_tx.send(true);
+        if let Some(t) = self.client_task.take() {
+            let limit = Duration::from_millis(self.cfg.output.modbus.timeout_ms.min(800) + 100);
+            if tokio::time::timeout(limit, t).await.is_err() {
+                tracing::warn!("plc client did not finish its final write in time");
+            }
+        }
+        if !self.server_tasks.is_empty() {
+            tokio::time::sleep(Duration::from_millis(self.cfg.service.stop_grace_ms)).await;
+        }
+        for s in self.server_stops.drain(..) {
+            let _ = s.send(());
+        }
+        for t in self.server_tasks.drain(..) {
+            let _ = tokio::time::timeout(Duration::from_millis(200), t).await;
+        }
+        for t in self.aux_tasks.drain(..) {
+            t.abort();
+        }
+        self.serial_tx = None;
+        // Threads notice `stopping` within ~100 ms; a camera blocked in the driver is not waited for.
+        let deadline = Instant::now() + Duration::from_millis(400);
+        let mut threads: Vec<_> = self.pipeline_thread.take().into_iter().chain(self.other_threads.drain(..)).collect();
+        while Instant::now() < deadline && threads.iter().any(|t| !t.is_finished()) {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        for t in threads.drain(..) {
+            if t.is_finished() {
+                let _ = t.join();
+            }
+        }
+        self.shared.log(Level::INFO, format!("stopped in {} ms", t0.elapsed().as_millis()));
+    }
+}

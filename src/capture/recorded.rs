@@ -1,0 +1,176 @@
+//! Recorded MOTChallenge sequences (`img1/*.jpg`, `seqinfo.ini`) as a frame source: paced at the
+//! sequence's frame rate and looping (like a camera that never stops), or as fast as possible.
+
+use super::{CaptureError, Frame, FrameSource, PixelFormat};
+use crate::units::Seconds;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// A recorded sequence played as a camera.
+#[derive(Debug)]
+pub struct RecordedSource {
+    dir: PathBuf,
+    files: Vec<PathBuf>,
+    fps: f64,
+    width: u32,
+    height: u32,
+    realtime: bool,
+    looping: bool,
+    /// Frames delivered so far (never reset; gives the monotonic timestamp).
+    delivered: u64,
+    start: Option<Instant>,
+}
+
+/// Reads `key=value` from a `seqinfo.ini` text.
+fn ini_value<'a>(text: &'a str, key: &str) -> Option<&'a str> {
+    text.lines().find_map(|l| {
+        let (k, v) = l.split_once('=')?;
+        (k.trim().eq_ignore_ascii_case(key)).then(|| v.trim())
+    })
+}
+
+impl RecordedSource {
+    /// Opens a sequence directory. `realtime` paces frames at `frameRate`; `looping` restarts at the end.
+    pub fn open(dir: &Path, realtime: bool, looping: bool) -> Result<Self, CaptureError> {
+        let open_err = |message: String| CaptureError::Open { path: dir.to_path_buf(), message };
+        if !dir.is_dir() {
+            return Err(CaptureError::NotFound { path: dir.to_path_buf() });
+        }
+        let ini_path = dir.join("seqinfo.ini");
+        let ini = std::fs::read_to_string(&ini_path).map_err(|e| open_err(format!("{}: {e}", ini_path.display())))?;
+        let fps: f64 = ini_value(&ini, "frameRate")
+            .and_then(|v| v.parse().ok())
+            .filter(|f: &f64| f.is_finite() && *f > 0.0)
+            .ok_or_else(|| open_err(format!("{}: missing or invalid frameRate", ini_path.display())))?;
+        let im_dir = ini_value(&ini, "imDir").unwrap_or("img1");
+        let ext = ini_value(&ini, "imExt").unwrap_or(".jpg").to_ascii_lowercase();
+        let img_dir = dir.join(im_dir);
+        let entries = std::fs::read_dir(&img_dir).map_err(|e| open_err(format!("{}: {e}", img_dir.display())))?;
+        let mut files: Vec<PathBuf> = entries
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| {
+                p.extension().map(|x| format!(".{}", x.to_string_lossy().to_ascii_lowercase())) == Some(ext.clone())
+            })
+            .collect();
+        files.sort();
+        if files.is_empty() {
+            return Err(open_err(format!("{}: no {ext} frames", img_dir.display())));
+        }
+        if ext != ".jpg" && ext != ".jpeg" {
+            return Err(open_err(format!("{}: only JPEG frames are supported, imExt is {ext}", ini_path.display())));
+        }
+        let dims = image::image_dimensions(&files[0]).map_err(|e| open_err(format!("{}: {e}", files[0].display())))?;
+        let width = ini_value(&ini, "imWidth").and_then(|v| v.parse().ok()).unwrap_or(dims.0);
+        let height = ini_value(&ini, "imHeight").and_then(|v| v.parse().ok()).unwrap_or(dims.1);
+        Ok(Self { dir: dir.to_path_buf(), files, fps, width, height, realtime, looping, delivered: 0, start: None })
+    }
+
+    /// Frames in one pass of the sequence.
+    pub fn len(&self) -> usize {
+        self.files.len()
+    }
+
+    /// Whether the sequence has no frames (never true for an opened source).
+    pub fn is_empty(&self) -> bool {
+        self.files.is_empty()
+    }
+
+    /// The sequence's frame rate, frames/s.
+    pub fn fps(&self) -> f64 {
+        self.fps
+    }
+}
+
+impl FrameSource for RecordedSource {
+    fn next_frame(&mut self, buf: Vec<u8>) -> Result<Frame, CaptureError> {
+        let n = self.files.len() as u64;
+        if !self.looping && self.delivered >= n {
+            return Err(CaptureError::End);
+        }
+        let idx = (self.delivered % n) as usize;
+        let timestamp = Seconds(self.delivered as f64 / self.fps);
+        if self.realtime {
+            let start = *self.start.get_or_insert_with(Instant::now);
+            let due = start + Duration::from_secs_f64(timestamp.get());
+            let now = Instant::now();
+            if due > now {
+                std::thread::sleep(due - now);
+            }
+        }
+        let path = &self.files[idx];
+        let mut data = buf;
+        data.clear();
+        if let Err(e) = std::fs::File::open(path).and_then(|mut f| std::io::Read::read_to_end(&mut f, &mut data)) {
+            self.delivered += 1; // skip the unreadable frame instead of retrying it forever
+            return Err(CaptureError::Read { path: path.clone(), message: e.to_string() });
+        }
+        let frame = Frame {
+            seq: self.delivered,
+            timestamp,
+            arrived: Instant::now(),
+            width: self.width,
+            height: self.height,
+            format: PixelFormat::Jpeg,
+            data,
+        };
+        self.delivered += 1;
+        Ok(frame)
+    }
+
+    fn reopen(&mut self) -> Result<(), CaptureError> {
+        // Nothing to reopen; a missing file shows up again as a Read error on the next frame.
+        if self.dir.is_dir() { Ok(()) } else { Err(CaptureError::NotFound { path: self.dir.clone() }) }
+    }
+
+    fn paced(&self) -> bool {
+        self.realtime
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "recording {} ({} frames, {}x{} @ {} fps, {}{})",
+            self.dir.display(),
+            self.files.len(),
+            self.width,
+            self.height,
+            self.fps,
+            if self.realtime { "real time" } else { "as fast as possible" },
+            if self.looping { ", looping" } else { "" }
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unreadable_frame_is_skipped_and_timestamps_stay_monotonic() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::create_dir_all(dir.path().join("img1")).expect("mkdir");
+        std::fs::write(dir.path().join("seqinfo.ini"), "[Sequence]\nframeRate=10\nimExt=.jpg\n").expect("ini");
+        let img = image::GrayImage::from_pixel(4, 4, image::Luma([9]));
+        img.save(dir.path().join("img1/000001.jpg")).expect("save");
+        img.save(dir.path().join("img1/000003.jpg")).expect("save");
+        // A directory named like a frame cannot be read as a file.
+        std::fs::create_dir(dir.path().join("img1/000002.jpg")).expect("mkdir");
+        let mut s = RecordedSource::open(dir.path(), false, true).expect("open");
+        assert_eq!((s.len(), s.fps()), (3, 10.0));
+        let a = s.next_frame(Vec::new()).expect("frame 1");
+        assert!(matches!(s.next_frame(Vec::new()), Err(CaptureError::Read { .. })));
+        let c = s.next_frame(Vec::new()).expect("frame 3");
+        let d = s.next_frame(Vec::new()).expect("loops to frame 1");
+        assert_eq!((a.seq, c.seq, d.seq), (0, 2, 3));
+        assert!(a.timestamp.get() < c.timestamp.get() && c.timestamp.get() < d.timestamp.get());
+        assert_eq!((d.width, d.height), (4, 4));
+        let mut once = RecordedSource::open(dir.path(), false, false).expect("open");
+        for _ in 0..3 {
+            let _ = once.next_frame(Vec::new());
+        }
+        assert!(matches!(once.next_frame(Vec::new()), Err(CaptureError::End)));
+        assert!(matches!(
+            RecordedSource::open(&dir.path().join("nope"), false, false),
+            Err(CaptureError::NotFound { .. })
+        ));
+    }
+}

@@ -1,0 +1,287 @@
+//! The configuration schema: one struct per section of `config/fme.toml`, in pipeline order.
+//!
+//! Every field has a default (documented next to it and in `config/fme.toml`), so an empty file is a
+//! valid configuration. Unknown keys are errors: a typo must never be silently ignored on a box that
+//! runs unattended for months.
+
+use serde::Deserialize;
+use std::path::PathBuf;
+
+pub use super::stages::{DepthConfig, DetectorConfig, MotionConfig, PostprocessConfig, TrackerConfig};
+
+/// The whole configuration of `fme run`.
+#[derive(Debug, Clone, Default, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    /// `[source]`: camera or recorded sequence.
+    pub source: SourceConfig,
+    /// `[detector]`: ONNX fish detector.
+    pub detector: DetectorConfig,
+    /// `[depth]`: ONNX relative-depth network.
+    pub depth: DepthConfig,
+    /// `[tracker]`: Kalman tracking-by-detection.
+    pub tracker: TrackerConfig,
+    /// `[postprocess]`: box-fluctuation and depth-jump detectors (paper eq. 3-4).
+    pub postprocess: PostprocessConfig,
+    /// `[motion]`: speeds and the activity index (paper eq. 5).
+    pub motion: MotionConfig,
+    /// `[output]`: Modbus and serial line.
+    pub output: OutputConfig,
+    /// `[console]`: serial field-diagnostics console.
+    pub console: ConsoleConfig,
+    /// `[feeding]`: the feeding-recommended rule.
+    pub feeding: FeedingConfig,
+    /// `[service]`: watchdog, logging, threads.
+    pub service: ServiceConfig,
+}
+
+/// Pixel format asked of a V4L2 camera.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum CameraFormat {
+    /// Motion JPEG (compressed; needed for 30 fps over USB 2.0 at 720p and above).
+    Mjpeg,
+    /// Packed YUV 4:2:2.
+    Yuyv,
+}
+
+/// `[source]`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct SourceConfig {
+    /// A V4L2 device (`/dev/videoN`) or a MOTChallenge sequence directory (`img1/`, `seqinfo.ini`).
+    pub path: PathBuf,
+    /// Requested width, px (camera only; the driver may pick another, which is logged).
+    pub width: u32,
+    /// Requested height, px (camera only).
+    pub height: u32,
+    /// Requested frame rate, frames/s (camera only).
+    pub fps: u32,
+    /// Camera pixel format.
+    pub format: CameraFormat,
+    /// Number of MMAP buffers (camera only).
+    pub buffers: u32,
+    /// Capture timeout, ms: no frame for this long = camera stalled -> reconnect.
+    pub timeout_ms: u64,
+    /// Recorded sequences: pace frames at the sequence's fps (true) or as fast as possible (false).
+    pub realtime: bool,
+    /// Recorded sequences: start again at the end, like a camera that never stops.
+    #[serde(rename = "loop")]
+    pub looping: bool,
+    /// Frames held between capture and pipeline; when full the oldest is dropped and counted.
+    pub queue_frames: usize,
+    /// First reconnect delay after a camera failure, ms (doubles up to `reconnect_max_ms`).
+    pub reconnect_min_ms: u64,
+    /// Longest reconnect delay, ms.
+    pub reconnect_max_ms: u64,
+}
+
+impl Default for SourceConfig {
+    fn default() -> Self {
+        Self {
+            path: PathBuf::from("/dev/video0"),
+            width: 640,
+            height: 384,
+            fps: 30,
+            format: CameraFormat::Mjpeg,
+            buffers: 4,
+            timeout_ms: 2000,
+            realtime: true,
+            looping: true,
+            queue_frames: 4,
+            reconnect_min_ms: 500,
+            reconnect_max_ms: 30_000,
+        }
+    }
+}
+
+/// `[output]`: update rate and staleness, plus `[output.modbus]` and `[output.serial]`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct OutputConfig {
+    /// Activity updates sent to the outputs, Hz (the heartbeat register increments at this rate).
+    pub rate_hz: f64,
+    /// A value older than this is flagged stale and published as NaN, s.
+    pub stale_after_s: f64,
+    /// `[output.modbus]`.
+    pub modbus: ModbusConfig,
+    /// `[output.serial]`.
+    pub serial: SerialLineConfig,
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        Self { rate_hz: 1.0, stale_after_s: 5.0, modbus: ModbusConfig::default(), serial: SerialLineConfig::default() }
+    }
+}
+
+/// Modbus role.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModbusMode {
+    /// No Modbus.
+    Off,
+    /// TCP server: the PLC polls (default).
+    TcpServer,
+    /// TCP client: one FC16 write of the register block to the PLC per update.
+    TcpClient,
+    /// RTU server on a serial line (RS-485).
+    RtuServer,
+    /// RTU client on a serial line.
+    RtuClient,
+}
+
+/// Order of the two 16-bit words of a float32/uint32.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum WordOrder {
+    /// High word first (ABCD, "big endian"; default).
+    #[default]
+    HighFirst,
+    /// Low word first (CDAB, "Modicon"/little-endian word order).
+    LowFirst,
+}
+
+/// Serial parity.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Parity {
+    /// No parity.
+    None,
+    /// Even parity (the Modbus RTU default).
+    Even,
+    /// Odd parity.
+    Odd,
+}
+
+/// `[output.modbus]`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct ModbusConfig {
+    /// Role: `off`, `tcp-server`, `tcp-client`, `rtu-server`, `rtu-client`.
+    pub mode: ModbusMode,
+    /// TCP server: address to listen on, HOST:PORT.
+    pub listen: String,
+    /// TCP client: the PLC's address, HOST:PORT.
+    pub peer: String,
+    /// Unit (slave) id: served by the RTU server; addressed by the clients.
+    pub unit_id: u8,
+    /// Word order of float32/uint32 values.
+    pub word_order: WordOrder,
+    /// Client modes: first holding register of the block in the PLC (0-based PDU address).
+    pub base_address: u16,
+    /// RTU: serial device.
+    pub serial_device: String,
+    /// RTU: baud rate, bit/s.
+    pub baud: u32,
+    /// RTU: parity.
+    pub parity: Parity,
+    /// RTU: stop bits (1 or 2).
+    pub stop_bits: u8,
+    /// Timeout of every Modbus call, ms.
+    pub timeout_ms: u64,
+    /// First reconnect delay after losing the PLC, ms (doubles up to `reconnect_max_ms`).
+    pub reconnect_min_ms: u64,
+    /// Longest reconnect delay, ms.
+    pub reconnect_max_ms: u64,
+}
+
+impl Default for ModbusConfig {
+    fn default() -> Self {
+        Self {
+            mode: ModbusMode::TcpServer,
+            listen: "0.0.0.0:502".into(),
+            peer: "192.168.0.10:502".into(),
+            unit_id: 1,
+            word_order: WordOrder::HighFirst,
+            base_address: 0,
+            serial_device: "/dev/ttyUSB0".into(),
+            baud: 19_200,
+            parity: Parity::Even,
+            stop_bits: 1,
+            timeout_ms: 1000,
+            reconnect_min_ms: 500,
+            reconnect_max_ms: 30_000,
+        }
+    }
+}
+
+/// `[output.serial]`: one ASCII line per update for simple data loggers.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct SerialLineConfig {
+    /// Write the line output.
+    pub enabled: bool,
+    /// Serial device.
+    pub device: String,
+    /// Baud rate, bit/s.
+    pub baud: u32,
+}
+
+impl Default for SerialLineConfig {
+    fn default() -> Self {
+        Self { enabled: false, device: "/dev/ttyUSB1".into(), baud: 9600 }
+    }
+}
+
+/// `[console]`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct ConsoleConfig {
+    /// Serve the console.
+    pub enabled: bool,
+    /// Serial device (or a pty path).
+    pub device: String,
+    /// Baud rate, bit/s.
+    pub baud: u32,
+    /// Log lines kept for `log [n]`.
+    pub log_lines: usize,
+    /// Echo typed characters back (picocom/screen do not echo locally).
+    pub echo: bool,
+}
+
+impl Default for ConsoleConfig {
+    fn default() -> Self {
+        Self { enabled: false, device: "/dev/ttyS0".into(), baud: 115_200, log_lines: 200, echo: true }
+    }
+}
+
+/// `[feeding]`: hysteresis on the smoothed activity with minimum on/off times.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct FeedingConfig {
+    /// Recommend feeding when the smoothed activity rises to this or above, m/s.
+    pub on_above_mps: f64,
+    /// Stop recommending when the smoothed activity falls to this or below, m/s.
+    pub off_below_mps: f64,
+    /// Shortest time the recommendation stays on, s.
+    pub min_on_s: f64,
+    /// Shortest time the recommendation stays off, s.
+    pub min_off_s: f64,
+}
+
+impl Default for FeedingConfig {
+    fn default() -> Self {
+        Self { on_above_mps: 0.25, off_below_mps: 0.15, min_on_s: 300.0, min_off_s: 600.0 }
+    }
+}
+
+/// `[service]`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct ServiceConfig {
+    /// Notify systemd (READY, WATCHDOG pings from the frame loop) when started by it.
+    pub systemd_notify: bool,
+    /// The pipeline counts as stuck when it has not finished a frame for this long, s.
+    pub stall_after_s: f64,
+    /// Print a live one-line view of the activity on stderr (for demos), s between refreshes (0 = off).
+    pub live_view_s: f64,
+    /// On SIGTERM/SIGINT: keep serving the "stopped" registers this long before exiting, ms (<= 1500).
+    pub stop_grace_ms: u64,
+}
+
+impl Default for ServiceConfig {
+    fn default() -> Self {
+        Self { systemd_notify: true, stall_after_s: 5.0, live_view_s: 0.0, stop_grace_ms: 500 }
+    }
+}

@@ -1,0 +1,365 @@
+//! Modbus in all four roles (tokio-modbus): TCP server (default; the PLC polls), TCP client (one
+//! FC16 write of the block per update), RTU server and RTU client over a serial line.
+//!
+//! Every client call has a timeout (tokio-modbus has none of its own, issue #113); a lost PLC is
+//! reconnected with exponential backoff (tokio-modbus does not reconnect, #219/#309); the pipeline
+//! only ever publishes into the [`RegisterBank`] and never waits on the PLC.
+
+use super::bank::RegisterBank;
+use super::registers::{BLOCK_LEN, HR_WRITABLE_LEN, HR_WRITABLE_START};
+use crate::capture::Backoff;
+use crate::config::{ModbusConfig, Parity};
+use std::future::Future;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio_modbus::prelude::*;
+use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
+
+/// A Modbus role failed to start (bind, open serial). Runtime failures are retried, not returned.
+#[derive(Debug, thiserror::Error)]
+pub enum ModbusError {
+    /// Binding the TCP listener failed.
+    #[error("modbus tcp server: cannot listen on {addr}: {source}")]
+    Bind {
+        /// The address.
+        addr: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// Opening the serial device failed.
+    #[error("modbus rtu: cannot open {device}: {message}")]
+    Serial {
+        /// The device.
+        device: String,
+        /// What failed.
+        message: String,
+    },
+}
+
+/// The server-side request handler over a [`RegisterBank`] (shared by the TCP and RTU servers).
+///
+/// FC03/FC04 read the block (holding registers also expose HR 100..103); FC06/FC16 may write only
+/// HR 100..103 (anything else: IllegalDataAddress); FC01/FC02 read coil/discrete input 0 = feeding
+/// recommended; any other function: IllegalFunction. With `unit_id = Some(id)` (RTU) requests for
+/// other units are ignored (no reply), as on a shared RS-485 bus.
+#[derive(Debug, Clone)]
+pub struct RegisterService {
+    bank: Arc<RegisterBank>,
+    unit_id: Option<u8>,
+}
+
+impl RegisterService {
+    /// A handler; `unit_id` filters requests (RTU), `None` answers every unit id (TCP).
+    pub fn new(bank: Arc<RegisterBank>, unit_id: Option<u8>) -> Self {
+        Self { bank, unit_id }
+    }
+
+    fn read(&self, addr: u16, cnt: u16, holding: bool) -> Result<Vec<u16>, ExceptionCode> {
+        if cnt == 0 || cnt > 125 {
+            return Err(ExceptionCode::IllegalDataValue);
+        }
+        let (start, end) = (usize::from(addr), usize::from(addr) + usize::from(cnt));
+        if end <= BLOCK_LEN {
+            return Ok(self.bank.block()[start..end].to_vec());
+        }
+        let hr_start = usize::from(HR_WRITABLE_START);
+        if holding && start >= hr_start && end <= hr_start + HR_WRITABLE_LEN {
+            return Ok(self.bank.writable()[start - hr_start..end - hr_start].to_vec());
+        }
+        Err(ExceptionCode::IllegalDataAddress)
+    }
+
+    fn bits(&self, addr: u16, cnt: u16) -> Result<Vec<bool>, ExceptionCode> {
+        if cnt == 0 || cnt > 2000 {
+            return Err(ExceptionCode::IllegalDataValue);
+        }
+        if addr != 0 || cnt != 1 {
+            return Err(ExceptionCode::IllegalDataAddress);
+        }
+        Ok(vec![self.bank.block()[17] != 0])
+    }
+
+    /// Handles one request (pure apart from the bank).
+    pub fn handle(&self, req: Request<'_>) -> Result<Response, ExceptionCode> {
+        match req {
+            Request::ReadInputRegisters(a, n) => self.read(a, n, false).map(Response::ReadInputRegisters),
+            Request::ReadHoldingRegisters(a, n) => self.read(a, n, true).map(Response::ReadHoldingRegisters),
+            Request::ReadCoils(a, n) => self.bits(a, n).map(Response::ReadCoils),
+            Request::ReadDiscreteInputs(a, n) => self.bits(a, n).map(Response::ReadDiscreteInputs),
+            Request::WriteSingleRegister(a, v) => {
+                if self.bank.write_holding(a, &[v]) {
+                    Ok(Response::WriteSingleRegister(a, v))
+                } else {
+                    Err(ExceptionCode::IllegalDataAddress)
+                }
+            }
+            Request::WriteMultipleRegisters(a, words) => {
+                if words.is_empty() || words.len() > 123 {
+                    Err(ExceptionCode::IllegalDataValue)
+                } else if self.bank.write_holding(a, &words) {
+                    Ok(Response::WriteMultipleRegisters(a, words.len() as u16))
+                } else {
+                    Err(ExceptionCode::IllegalDataAddress)
+                }
+            }
+            Request::WriteSingleCoil(..) | Request::WriteMultipleCoils(..) => Err(ExceptionCode::IllegalDataAddress),
+            _ => Err(ExceptionCode::IllegalFunction),
+        }
+    }
+}
+
+impl tokio_modbus::server::Service for RegisterService {
+    type Request = SlaveRequest<'static>;
+    type Response = Option<Response>;
+    type Exception = ExceptionCode;
+    type Future = std::future::Ready<Result<Option<Response>, ExceptionCode>>;
+
+    fn call(&self, req: Self::Request) -> Self::Future {
+        if let Some(id) = self.unit_id
+            && req.slave != id
+            && req.slave != 0
+        {
+            return std::future::ready(Ok(None));
+        }
+        let res = self.handle(req.request);
+        self.bank.note_request(res.is_err());
+        std::future::ready(res.map(Some))
+    }
+}
+
+/// Binds the TCP server (so bind errors surface at start-up). Returns the listener and its address.
+pub async fn bind_tcp(listen: &str) -> Result<(tokio::net::TcpListener, SocketAddr), ModbusError> {
+    let l = tokio::net::TcpListener::bind(listen)
+        .await
+        .map_err(|source| ModbusError::Bind { addr: listen.to_string(), source })?;
+    let addr = l.local_addr().map_err(|source| ModbusError::Bind { addr: listen.to_string(), source })?;
+    Ok((l, addr))
+}
+
+/// Serves Modbus TCP on `listener` until `shutdown` resolves.
+pub async fn serve_tcp(
+    listener: tokio::net::TcpListener,
+    bank: Arc<RegisterBank>,
+    shutdown: impl Future<Output = ()> + Send + Sync + 'static,
+) {
+    let server = tokio_modbus::server::tcp::Server::new(listener);
+    let new_service = move |_addr: SocketAddr| Ok(Some(RegisterService::new(bank.clone(), None)));
+    let on_connected = move |stream, addr| {
+        let new_service = new_service.clone();
+        async move { tokio_modbus::server::tcp::accept_tcp_connection(stream, addr, new_service) }
+    };
+    let on_err = |e: std::io::Error| tracing::debug!("modbus tcp connection ended: {e}");
+    if let Err(e) = server.serve_until(&on_connected, on_err, shutdown).await {
+        tracing::error!("modbus tcp server stopped: {e}");
+    }
+}
+
+fn serial_builder(cfg: &ModbusConfig) -> tokio_serial::SerialPortBuilder {
+    let parity = match cfg.parity {
+        Parity::None => tokio_serial::Parity::None,
+        Parity::Even => tokio_serial::Parity::Even,
+        Parity::Odd => tokio_serial::Parity::Odd,
+    };
+    let stop = if cfg.stop_bits == 2 { tokio_serial::StopBits::Two } else { tokio_serial::StopBits::One };
+    tokio_serial::new(&cfg.serial_device, cfg.baud)
+        .parity(parity)
+        .stop_bits(stop)
+        .data_bits(tokio_serial::DataBits::Eight)
+}
+
+/// Opens the RTU serial device described by `cfg`.
+pub fn open_serial(cfg: &ModbusConfig) -> Result<tokio_serial::SerialStream, ModbusError> {
+    tokio_serial::SerialStream::open(&serial_builder(cfg))
+        .map_err(|e| ModbusError::Serial { device: cfg.serial_device.clone(), message: e.to_string() })
+}
+
+/// Serves Modbus RTU on an opened serial stream (answers only `unit_id`) until `shutdown`.
+pub async fn serve_rtu(
+    serial: tokio_serial::SerialStream,
+    bank: Arc<RegisterBank>,
+    unit_id: u8,
+    shutdown: impl Future<Output = ()> + Send + Sync + 'static,
+) {
+    let server = tokio_modbus::server::rtu::Server::new(serial);
+    let svc = RegisterService::new(bank, Some(unit_id));
+    if let Err(e) = server.serve_until(svc, shutdown).await {
+        tracing::error!("modbus rtu server stopped: {e}");
+    }
+}
+
+/// RTU server role with recovery: opens `cfg.serial_device`, serves, and on an open failure or a
+/// lost device (USB RS-485 adapter unplugged) logs, waits with backoff and reopens, until `shutdown`.
+pub async fn run_rtu_server(
+    cfg: ModbusConfig,
+    bank: Arc<RegisterBank>,
+    mut shutdown: tokio::sync::watch::Receiver<bool>,
+) {
+    let mut backoff =
+        Backoff::new(Duration::from_millis(cfg.reconnect_min_ms), Duration::from_millis(cfg.reconnect_max_ms));
+    while !*shutdown.borrow() {
+        match open_serial(&cfg) {
+            Ok(port) => {
+                backoff.reset();
+                tracing::info!("modbus rtu server on {} unit {}", cfg.serial_device, cfg.unit_id);
+                let mut rx = shutdown.clone();
+                let stop = async move {
+                    let _ = rx.wait_for(|s| *s).await;
+                };
+                let server = tokio_modbus::server::rtu::Server::new(port);
+                let svc = RegisterService::new(bank.clone(), Some(cfg.unit_id));
+                // serve_until needs a Sync future; run the stop signal through a oneshot.
+                let (tx, orx) = tokio::sync::oneshot::channel::<()>();
+                let relay = tokio::spawn(async move {
+                    stop.await;
+                    let _ = tx.send(());
+                });
+                let res = server
+                    .serve_until(svc, async move {
+                        let _ = orx.await;
+                    })
+                    .await;
+                relay.abort();
+                match res {
+                    Ok(tokio_modbus::server::Terminated::Aborted) => return,
+                    Ok(_) => tracing::warn!("modbus rtu {}: port closed", cfg.serial_device),
+                    Err(e) => tracing::warn!("modbus rtu {}: {e}", cfg.serial_device),
+                }
+            }
+            Err(e) => tracing::warn!("{e}"),
+        }
+        let d = backoff.next_delay();
+        tokio::select! {
+            _ = tokio::time::sleep(d) => {},
+            _ = shutdown.changed() => {},
+        }
+    }
+}
+
+/// How a client reaches the PLC.
+#[derive(Debug, Clone)]
+pub enum ClientTarget {
+    /// Modbus TCP to this HOST:PORT (resolved at each connect attempt).
+    Tcp(String),
+    /// Modbus RTU on this serial config.
+    Rtu(ModbusConfig),
+}
+
+/// Client settings.
+#[derive(Debug, Clone)]
+pub struct ClientSettings {
+    /// Where the PLC is.
+    pub target: ClientTarget,
+    /// Unit id addressed.
+    pub unit_id: u8,
+    /// First holding register of the block in the PLC.
+    pub base_address: u16,
+    /// Timeout of every call.
+    pub timeout: Duration,
+    /// Reconnect backoff.
+    pub backoff: Backoff,
+}
+
+async fn connect(s: &ClientSettings) -> Result<tokio_modbus::client::Context, String> {
+    let slave = Slave(s.unit_id);
+    match &s.target {
+        ClientTarget::Tcp(peer) => {
+            let attempt = async {
+                let addr = tokio::net::lookup_host(peer.as_str())
+                    .await?
+                    .next()
+                    .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::NotFound, "no address"))?;
+                tcp::connect_slave(addr, slave).await
+            };
+            match tokio::time::timeout(s.timeout, attempt).await {
+                Ok(Ok(ctx)) => Ok(ctx),
+                Ok(Err(e)) => Err(format!("connect {peer}: {e}")),
+                Err(_) => Err(format!("connect {peer}: timed out")),
+            }
+        }
+        ClientTarget::Rtu(cfg) => {
+            open_serial(cfg).map(|port| rtu::attach_slave(port, slave)).map_err(|e| e.to_string())
+        }
+    }
+}
+
+/// Client role: writes the block to the PLC with one FC16 per published update, until `shutdown`.
+/// Connection failures are retried with backoff; updates published meanwhile are coalesced (only
+/// the latest block is written). After `shutdown`, the current block (the "stopped" block) is
+/// written once more, best effort, within one timeout.
+pub async fn run_client(
+    settings: ClientSettings,
+    bank: Arc<RegisterBank>,
+    mut shutdown: tokio::sync::watch::Receiver<bool>,
+) {
+    let mut rx = bank.subscribe();
+    rx.mark_changed(); // write the current block at once, even if it was published before we subscribed
+    let mut ctx: Option<tokio_modbus::client::Context> = None;
+    let mut backoff = settings.backoff;
+    let mut retry_at: Option<tokio::time::Instant> = None;
+    loop {
+        let stopping = *shutdown.borrow();
+        if !stopping {
+            // Wait for a new block, or for the retry time when the last write failed.
+            let retry = async {
+                match retry_at {
+                    Some(t) => tokio::time::sleep_until(t).await,
+                    None => std::future::pending().await,
+                }
+            };
+            tokio::select! {
+                r = rx.changed() => if r.is_err() { return },
+                _ = retry => {},
+                _ = shutdown.changed() => {},
+            }
+        }
+        let block = *rx.borrow_and_update();
+        if ctx.is_none() {
+            match connect(&settings).await {
+                Ok(c) => ctx = Some(c),
+                Err(e) => {
+                    bank.note_client(false);
+                    let d = backoff.next_delay();
+                    tracing::warn!("plc link down ({e}); retry in {} ms", d.as_millis());
+                    retry_at = Some(tokio::time::Instant::now() + d);
+                    if stopping {
+                        return;
+                    }
+                    continue;
+                }
+            }
+        }
+        let Some(c) = ctx.as_mut() else { continue };
+        let res =
+            tokio::time::timeout(settings.timeout, c.write_multiple_registers(settings.base_address, &block)).await;
+        let err = match res {
+            Ok(Ok(Ok(()))) => None,
+            Ok(Ok(Err(exc))) => Some(format!("PLC answered exception {exc:?}")),
+            Ok(Err(e)) => Some(e.to_string()),
+            Err(_) => Some(format!("no answer within {} ms", settings.timeout.as_millis())),
+        };
+        match err {
+            None => {
+                if !bank.client_link_ok() {
+                    tracing::info!("plc link up");
+                }
+                bank.note_client(true);
+                backoff.reset();
+                retry_at = None;
+            }
+            Some(e) => {
+                bank.note_client(false);
+                ctx = None; // drop the context: tokio-modbus contexts do not recover
+                let d = backoff.next_delay();
+                tracing::warn!("plc write failed ({e}); reconnect in {} ms", d.as_millis());
+                retry_at = Some(tokio::time::Instant::now() + d);
+            }
+        }
+        if stopping {
+            if let Some(mut c) = ctx.take() {
+                let _ = tokio::time::timeout(settings.timeout, c.disconnect()).await;
+            }
+            return;
+        }
+    }
+}

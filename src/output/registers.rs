@@ -1,0 +1,254 @@
+//! The Modbus register map: a stable contract for PLC programmers (documented in the README).
+//!
+//! 0-based PDU addresses. float32 and uint32 use two registers; the word order is configurable
+//! (default high word first). Input registers 0..[`BLOCK_LEN`] hold the block below; holding registers
+//! 0..[`BLOCK_LEN`] mirror them read-only; holding registers [`HR_WRITABLE_START`].. are writable by
+//! the PLC. Coil 0 / discrete input 0 = feeding recommended.
+//!
+//! | reg | content |
+//! |---|---|
+//! | 0-1 | activity mean, m/s (float32; NaN when unavailable) |
+//! | 2-3 | activity mean, body lengths/s (float32) |
+//! | 4-5 | smoothed activity, m/s (float32) |
+//! | 6-7 | half-width of the 95% interval, m/s (float32) |
+//! | 8 | fish count |
+//! | 9 | activity mean, mm/s (uint16, saturating; 65535 = unavailable) |
+//! | 10 | status bits ([`status`]) |
+//! | 11 | fault code ([`FaultCode`]) |
+//! | 12 | heartbeat (increments every update, wraps) |
+//! | 13-14 | uptime, s (uint32) |
+//! | 15 | camera frames/s x10 |
+//! | 16 | dropped frames: queue drops + driver sequence gaps (wrapping) |
+//! | 17 | feeding recommended (0/1) |
+//! | 18 | version major |
+//! | 19 | version minor |
+//! | 20 | detector runs/s x10 |
+//! | 21 | depth runs/s x10 |
+//! | 22 | age of the activity value, 0.1 s (saturating) |
+//! | 23 | last feeding acknowledge written by the PLC (echo of HR 100) |
+
+use crate::config::WordOrder;
+
+/// Registers in the block.
+pub const BLOCK_LEN: usize = 24;
+/// First holding register writable by the PLC.
+pub const HR_WRITABLE_START: u16 = 100;
+/// Number of writable holding registers.
+pub const HR_WRITABLE_LEN: usize = 4;
+/// HR 100: feeding acknowledge (the PLC writes 1 when it acted on "feeding recommended", 0 otherwise).
+pub const HR_FEEDING_ACK: u16 = 100;
+/// HR 101: PLC heartbeat (the PLC increments it; shown on the console so a technician sees the link).
+pub const HR_PLC_HEARTBEAT: u16 = 101;
+/// HR 102-103: reserved, writable, stored and echoed on the console only.
+pub const HR_RESERVED: u16 = 102;
+
+/// Status bits of register 10.
+pub mod status {
+    /// Bit 0: the daemon is running (cleared in the final "stopped" write).
+    pub const RUNNING: u16 = 1 << 0;
+    /// Bit 1: the camera delivers frames.
+    pub const CAMERA_OK: u16 = 1 << 1;
+    /// Bit 2: the detector works.
+    pub const DETECTOR_OK: u16 = 1 << 2;
+    /// Bit 3: metric depth is calibrated.
+    pub const DEPTH_CALIBRATED: u16 = 1 << 3;
+    /// Bit 4: the activity value is stale.
+    pub const STALE: u16 = 1 << 4;
+    /// Bit 5: the PLC link is up (server: a request within the last 10 s; client: last write succeeded).
+    pub const PLC_LINK_OK: u16 = 1 << 5;
+    /// Bit 6: too few fish tracked for a reliable mean.
+    pub const TOO_FEW_FISH: u16 = 1 << 6;
+}
+
+/// Fault code of register 11: the most severe current problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u16)]
+pub enum FaultCode {
+    /// 0: no fault.
+    #[default]
+    None = 0,
+    /// 1: camera lost or stalled (reconnecting).
+    Camera = 1,
+    /// 2: detector failed.
+    Detector = 2,
+    /// 3: depth network failed.
+    Depth = 3,
+    /// 4: pipeline stalled (no frame processed within `service.stall_after_s`).
+    PipelineStalled = 4,
+    /// 5: PLC link down (client modes).
+    PlcLink = 5,
+    /// 6: the daemon has stopped (final write before exit).
+    Stopped = 6,
+}
+
+/// Everything the register block is computed from (a pure value: the encoder has no I/O).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RegisterInputs {
+    /// Activity mean, m/s (NaN when unavailable).
+    pub mean_mps: f64,
+    /// Activity mean, body lengths/s.
+    pub mean_bls: f64,
+    /// Smoothed activity, m/s.
+    pub smoothed_mps: f64,
+    /// 95% interval half-width, m/s.
+    pub ci95_half_mps: f64,
+    /// Fish count.
+    pub fish: u32,
+    /// Status bits ([`status`]).
+    pub status: u16,
+    /// Fault code.
+    pub fault: FaultCode,
+    /// Heartbeat counter.
+    pub heartbeat: u16,
+    /// Uptime, s.
+    pub uptime_s: u32,
+    /// Camera frame rate, frames/s.
+    pub camera_fps: f64,
+    /// Dropped frames (total).
+    pub dropped: u64,
+    /// Feeding recommended.
+    pub feeding: bool,
+    /// Detector runs/s.
+    pub detector_hz: f64,
+    /// Depth runs/s.
+    pub depth_hz: f64,
+    /// Age of the activity value, s (infinite when there is none).
+    pub value_age_s: f64,
+    /// Last feeding acknowledge from the PLC.
+    pub feeding_ack: u16,
+}
+
+/// Splits a 32-bit value into two registers in the configured word order.
+pub fn split_u32(v: u32, order: WordOrder) -> [u16; 2] {
+    let (hi, lo) = ((v >> 16) as u16, v as u16);
+    match order {
+        WordOrder::HighFirst => [hi, lo],
+        WordOrder::LowFirst => [lo, hi],
+    }
+}
+
+/// Joins two registers into a 32-bit value (inverse of [`split_u32`]).
+pub fn join_u32(regs: [u16; 2], order: WordOrder) -> u32 {
+    let (hi, lo) = match order {
+        WordOrder::HighFirst => (regs[0], regs[1]),
+        WordOrder::LowFirst => (regs[1], regs[0]),
+    };
+    (u32::from(hi) << 16) | u32::from(lo)
+}
+
+/// Encodes an IEEE-754 float32 into two registers.
+pub fn encode_f32(v: f32, order: WordOrder) -> [u16; 2] {
+    split_u32(v.to_bits(), order)
+}
+
+/// Decodes two registers into a float32.
+pub fn decode_f32(regs: [u16; 2], order: WordOrder) -> f32 {
+    f32::from_bits(join_u32(regs, order))
+}
+
+/// Non-negative value x `scale`, rounded and saturated to u16; `nan_value` for NaN/negative/infinite.
+fn scaled_u16(v: f64, scale: f64, nan_value: u16) -> u16 {
+    if v.is_finite() && v >= 0.0 { (v * scale).round().min(f64::from(u16::MAX - 1)) as u16 } else { nan_value }
+}
+
+/// The crate version (major, minor) for registers 18-19.
+pub fn version() -> (u16, u16) {
+    (env!("CARGO_PKG_VERSION_MAJOR").parse().unwrap_or(0), env!("CARGO_PKG_VERSION_MINOR").parse().unwrap_or(0))
+}
+
+/// Encodes the register block (pure; see the module table).
+pub fn encode(inp: &RegisterInputs, order: WordOrder) -> [u16; BLOCK_LEN] {
+    let mut r = [0u16; BLOCK_LEN];
+    let mut put_f32 = |at: usize, v: f64| r[at..at + 2].copy_from_slice(&encode_f32(v as f32, order));
+    put_f32(0, inp.mean_mps);
+    put_f32(2, inp.mean_bls);
+    put_f32(4, inp.smoothed_mps);
+    put_f32(6, inp.ci95_half_mps);
+    r[8] = inp.fish.min(u32::from(u16::MAX)) as u16;
+    r[9] = if inp.mean_mps.is_finite() && inp.mean_mps >= 0.0 {
+        (inp.mean_mps * 1000.0).round().min(65534.0) as u16
+    } else {
+        u16::MAX
+    };
+    r[10] = inp.status;
+    r[11] = inp.fault as u16;
+    r[12] = inp.heartbeat;
+    r[13..15].copy_from_slice(&split_u32(inp.uptime_s, order));
+    r[15] = scaled_u16(inp.camera_fps, 10.0, 0);
+    r[16] = inp.dropped as u16; // wrapping by contract
+    r[17] = u16::from(inp.feeding);
+    let (maj, min) = version();
+    r[18] = maj;
+    r[19] = min;
+    r[20] = scaled_u16(inp.detector_hz, 10.0, 0);
+    r[21] = scaled_u16(inp.depth_hz, 10.0, 0);
+    r[22] = scaled_u16(inp.value_age_s, 10.0, u16::MAX - 1).min(u16::MAX - 1);
+    r[23] = inp.feeding_ack;
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn float_word_orders() {
+        // 1.5f32 = 0x3FC00000
+        assert_eq!(encode_f32(1.5, WordOrder::HighFirst), [0x3FC0, 0x0000]);
+        assert_eq!(encode_f32(1.5, WordOrder::LowFirst), [0x0000, 0x3FC0]);
+        for o in [WordOrder::HighFirst, WordOrder::LowFirst] {
+            assert_eq!(decode_f32(encode_f32(-0.123, o), o), -0.123);
+            assert_eq!(join_u32(split_u32(0xDEAD_BEEF, o), o), 0xDEAD_BEEF);
+        }
+    }
+
+    #[test]
+    fn block_layout() {
+        let inp = RegisterInputs {
+            mean_mps: 0.2345,
+            mean_bls: 0.67,
+            smoothed_mps: 0.25,
+            ci95_half_mps: 0.01,
+            fish: 17,
+            status: status::RUNNING | status::CAMERA_OK,
+            fault: FaultCode::Depth,
+            heartbeat: 65535,
+            uptime_s: 70_000,
+            camera_fps: 29.97,
+            dropped: 65_537,
+            feeding: true,
+            detector_hz: 10.04,
+            depth_hz: 5.0,
+            value_age_s: 0.42,
+            feeding_ack: 1,
+        };
+        let r = encode(&inp, WordOrder::HighFirst);
+        assert_eq!(decode_f32([r[0], r[1]], WordOrder::HighFirst), 0.2345);
+        assert_eq!(decode_f32([r[4], r[5]], WordOrder::HighFirst), 0.25);
+        assert_eq!(r[8], 17);
+        assert_eq!(r[9], 235);
+        assert_eq!(r[10], 0b11);
+        assert_eq!(r[11], 3);
+        assert_eq!(r[12], 65535);
+        assert_eq!(join_u32([r[13], r[14]], WordOrder::HighFirst), 70_000);
+        assert_eq!(r[15], 300);
+        assert_eq!(r[16], 1);
+        assert_eq!(r[17], 1);
+        assert_eq!((r[18], r[19]), version());
+        assert_eq!((r[20], r[21], r[22], r[23]), (100, 50, 4, 1));
+        let low = encode(&inp, WordOrder::LowFirst);
+        assert_eq!([low[0], low[1]], [r[1], r[0]]);
+        assert_eq!([low[13], low[14]], [r[14], r[13]]);
+    }
+
+    #[test]
+    fn unavailable_values() {
+        let inp = RegisterInputs { mean_mps: f64::NAN, value_age_s: f64::INFINITY, ..Default::default() };
+        let r = encode(&inp, WordOrder::HighFirst);
+        assert!(decode_f32([r[0], r[1]], WordOrder::HighFirst).is_nan());
+        assert_eq!(r[9], u16::MAX);
+        assert_eq!(r[22], u16::MAX - 1);
+        let big = RegisterInputs { mean_mps: 1000.0, ..Default::default() };
+        assert_eq!(encode(&big, WordOrder::HighFirst)[9], 65534);
+    }
+}

@@ -1,0 +1,230 @@
+//! Health published as first-class status: one shared snapshot read by the registers, the console
+//! and the watchdog, plus a small ring of recent log lines for the console `log` command.
+
+use super::pipeline::{ActivitySample, CalibInfo, StageHealth};
+use crate::output::bank::RegisterBank;
+use crate::output::registers::FaultCode;
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// Frame-to-register latency histogram: 1 ms buckets up to 1 s, one overflow bucket. Fixed size.
+#[derive(Debug, Clone)]
+pub struct LatencyHistogram {
+    buckets: [u32; 1001],
+    count: u64,
+    max_ms: f64,
+}
+
+impl Default for LatencyHistogram {
+    fn default() -> Self {
+        Self { buckets: [0; 1001], count: 0, max_ms: 0.0 }
+    }
+}
+
+impl LatencyHistogram {
+    /// Records one latency, ms.
+    pub fn record(&mut self, ms: f64) {
+        let i = if ms.is_finite() && ms >= 0.0 { (ms as usize).min(1000) } else { 1000 };
+        self.buckets[i] = self.buckets[i].saturating_add(1);
+        self.count += 1;
+        self.max_ms = self.max_ms.max(ms);
+    }
+    /// Samples recorded.
+    pub fn count(&self) -> u64 {
+        self.count
+    }
+    /// Largest latency seen, ms.
+    pub fn max_ms(&self) -> f64 {
+        self.max_ms
+    }
+    /// Upper bound of the 1 ms bucket holding quantile `q` (0..1), capped at the maximum, ms; `None` when empty.
+    pub fn quantile_ms(&self, q: f64) -> Option<f64> {
+        if self.count == 0 {
+            return None;
+        }
+        let target = ((q.clamp(0.0, 1.0) * self.count as f64).ceil() as u64).max(1);
+        let mut acc = 0u64;
+        for (i, b) in self.buckets.iter().enumerate() {
+            acc += u64::from(*b);
+            if acc >= target {
+                // Upper bucket edge, but never above the largest value actually seen.
+                return Some(if i == 1000 { self.max_ms } else { ((i + 1) as f64).min(self.max_ms) });
+            }
+        }
+        Some(self.max_ms)
+    }
+}
+
+/// The health snapshot.
+#[derive(Debug, Clone)]
+pub struct Health {
+    /// Process start.
+    pub started: Instant,
+    /// Source description.
+    pub source: String,
+    /// The camera delivers frames.
+    pub camera_ok: bool,
+    /// Camera frame rate over the last second, frames/s.
+    pub camera_fps: f64,
+    /// Frames captured.
+    pub frames_captured: u64,
+    /// Frames processed by the pipeline.
+    pub frames_processed: u64,
+    /// Frames dropped by the capture queue.
+    pub frames_dropped: u64,
+    /// Capture errors (timeouts, read errors).
+    pub capture_errors: u64,
+    /// Camera reconnects.
+    pub reconnects: u64,
+    /// Pipeline errors (bad frames, stage failures).
+    pub pipeline_errors: u64,
+    /// Updates published to the registers.
+    pub updates: u64,
+    /// Last activity sample.
+    pub last_sample: Option<ActivitySample>,
+    /// When it arrived.
+    pub last_sample_at: Option<Instant>,
+    /// When the pipeline last finished a frame.
+    pub last_processed_at: Option<Instant>,
+    /// Stage health.
+    pub stage: StageHealth,
+    /// Calibration.
+    pub calib: CalibInfo,
+    /// Current fault.
+    pub fault: FaultCode,
+    /// Feeding recommended.
+    pub feeding: bool,
+    /// Frame-to-register latency.
+    pub latency: LatencyHistogram,
+    /// Text of the current tracks (console `tracks`), refreshed at the output rate.
+    pub tracks_text: String,
+}
+
+impl Health {
+    fn new() -> Self {
+        Self {
+            started: Instant::now(),
+            source: String::new(),
+            camera_ok: false,
+            camera_fps: 0.0,
+            frames_captured: 0,
+            frames_processed: 0,
+            frames_dropped: 0,
+            capture_errors: 0,
+            reconnects: 0,
+            pipeline_errors: 0,
+            updates: 0,
+            last_sample: None,
+            last_sample_at: None,
+            last_processed_at: None,
+            stage: StageHealth::default(),
+            calib: CalibInfo::default(),
+            fault: FaultCode::None,
+            feeding: false,
+            latency: LatencyHistogram::default(),
+            tracks_text: String::new(),
+        }
+    }
+}
+
+/// State shared by every thread and task of the daemon.
+#[derive(Debug)]
+pub struct Shared {
+    health: Mutex<Health>,
+    log: Mutex<VecDeque<String>>,
+    log_cap: usize,
+    /// The register bank.
+    pub bank: Arc<RegisterBank>,
+    /// The configuration text as loaded (console `config`).
+    pub config_text: String,
+    stopping: AtomicBool,
+}
+
+impl Shared {
+    /// New shared state keeping `log_lines` log lines.
+    pub fn new(bank: Arc<RegisterBank>, config_text: String, log_lines: usize) -> Self {
+        Self {
+            health: Mutex::new(Health::new()),
+            log: Mutex::new(VecDeque::with_capacity(log_lines.max(1))),
+            log_cap: log_lines.max(1),
+            bank,
+            config_text,
+            stopping: AtomicBool::new(false),
+        }
+    }
+
+    /// Runs `f` on the health snapshot under its lock (keep `f` short).
+    pub fn with_health<R>(&self, f: impl FnOnce(&mut Health) -> R) -> R {
+        f(&mut self.health.lock().unwrap_or_else(|p| p.into_inner()))
+    }
+
+    /// A copy of the health snapshot.
+    pub fn health(&self) -> Health {
+        self.with_health(|h| h.clone())
+    }
+
+    /// Logs an event to tracing and to the console's log ring.
+    pub fn log(&self, level: tracing::Level, msg: impl Into<String>) {
+        let msg = msg.into();
+        match level {
+            tracing::Level::ERROR => tracing::error!("{msg}"),
+            tracing::Level::WARN => tracing::warn!("{msg}"),
+            tracing::Level::INFO => tracing::info!("{msg}"),
+            _ => tracing::debug!("{msg}"),
+        }
+        let up = self.with_health(|h| h.started.elapsed().as_secs_f64());
+        let mut ring = self.log.lock().unwrap_or_else(|p| p.into_inner());
+        if ring.len() >= self.log_cap {
+            ring.pop_front();
+        }
+        ring.push_back(format!("[{up:9.1}s] {level:5} {msg}"));
+    }
+
+    /// The last `n` log lines, oldest first.
+    pub fn last_logs(&self, n: usize) -> Vec<String> {
+        let ring = self.log.lock().unwrap_or_else(|p| p.into_inner());
+        ring.iter().skip(ring.len().saturating_sub(n)).cloned().collect()
+    }
+
+    /// Asks every thread to stop.
+    pub fn request_stop(&self) {
+        self.stopping.store(true, Ordering::SeqCst);
+    }
+
+    /// Whether a stop was requested.
+    pub fn stopping(&self) -> bool {
+        self.stopping.load(Ordering::SeqCst)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn latency_quantiles() {
+        let mut h = LatencyHistogram::default();
+        assert_eq!(h.quantile_ms(0.5), None);
+        for ms in 0..100 {
+            h.record(ms as f64 + 0.5);
+        }
+        assert_eq!(h.quantile_ms(0.5), Some(50.0));
+        assert_eq!(h.quantile_ms(0.99), Some(99.0));
+        h.record(5000.0);
+        assert_eq!(h.quantile_ms(1.0), Some(5000.0));
+    }
+
+    #[test]
+    fn log_ring_keeps_last() {
+        let s = Shared::new(Arc::new(RegisterBank::new()), String::new(), 3);
+        for i in 0..5 {
+            s.log(tracing::Level::INFO, format!("m{i}"));
+        }
+        let l = s.last_logs(10);
+        assert_eq!(l.len(), 3);
+        assert!(l[0].ends_with("m2") && l[2].ends_with("m4"), "{l:?}");
+        assert_eq!(s.last_logs(1).len(), 1);
+    }
+}

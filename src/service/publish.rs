@@ -1,0 +1,148 @@
+//! Turns the health snapshot into register blocks: status bits, fault code, heartbeat, feeding rule.
+
+use super::health::{Health, Shared};
+use crate::config::{Config, ModbusMode, WordOrder};
+use crate::output::feeding::FeedingRule;
+use crate::output::registers::{self, FaultCode, RegisterInputs, status};
+use std::time::{Duration, Instant};
+
+/// A server-role PLC link counts as up when it polled within this window.
+pub const SERVER_LINK_WINDOW: Duration = Duration::from_secs(10);
+
+/// Builds and publishes register blocks. Owned by whoever publishes (pipeline thread or keepalive),
+/// behind a mutex in [`super::Daemon`].
+#[derive(Debug)]
+pub struct Publisher {
+    heartbeat: u16,
+    feeding: FeedingRule,
+    order: WordOrder,
+    mode: ModbusMode,
+    stale_after: Duration,
+    stall_after: Duration,
+    /// Last publish (keepalive publishes when this gets old).
+    pub last_publish: Option<Instant>,
+    line: String,
+    /// Latched once the "stopped" block is published: a frame still in flight must not overwrite it.
+    stopped: bool,
+}
+
+impl Publisher {
+    /// A publisher for `cfg`.
+    pub fn new(cfg: &Config) -> Self {
+        Self {
+            heartbeat: 0,
+            feeding: FeedingRule::new(cfg.feeding.clone()),
+            order: cfg.output.modbus.word_order,
+            mode: cfg.output.modbus.mode,
+            stale_after: Duration::from_secs_f64(cfg.output.stale_after_s),
+            stall_after: Duration::from_secs_f64(cfg.service.stall_after_s),
+            last_publish: None,
+            line: String::with_capacity(128),
+            stopped: false,
+        }
+    }
+
+    /// Computes the register inputs at `now` (pure apart from advancing the heartbeat and feeding rule).
+    pub fn inputs(
+        &mut self,
+        h: &Health,
+        plc_link_ok: bool,
+        feeding_ack: u16,
+        now: Instant,
+        stopped: bool,
+    ) -> RegisterInputs {
+        self.heartbeat = self.heartbeat.wrapping_add(1);
+        let age = h.last_sample_at.map(|t| now.saturating_duration_since(t));
+        let stale = age.is_none_or(|a| a > self.stale_after);
+        let sample = h.last_sample.filter(|_| !stale);
+        let stalled =
+            h.camera_ok && h.last_processed_at.is_none_or(|t| now.saturating_duration_since(t) > self.stall_after);
+        let uptime = now.saturating_duration_since(h.started);
+        let smoothed = sample.map(|s| s.smoothed.get());
+        let feeding = if stopped { false } else { self.feeding.update(uptime.as_secs_f64(), smoothed) };
+        let mut bits = 0;
+        if !stopped {
+            bits |= status::RUNNING;
+        }
+        if h.camera_ok {
+            bits |= status::CAMERA_OK;
+        }
+        if h.stage.detector_ok {
+            bits |= status::DETECTOR_OK;
+        }
+        if h.calib.calibrated || h.last_sample.is_some_and(|s| !s.flags.depth_uncalibrated) {
+            bits |= status::DEPTH_CALIBRATED;
+        }
+        if stale {
+            bits |= status::STALE;
+        }
+        if plc_link_ok {
+            bits |= status::PLC_LINK_OK;
+        }
+        if h.last_sample.is_none_or(|s| s.flags.too_few_fish) {
+            bits |= status::TOO_FEW_FISH;
+        }
+        let client = matches!(self.mode, ModbusMode::TcpClient | ModbusMode::RtuClient);
+        let fault = if stopped {
+            FaultCode::Stopped
+        } else if !h.camera_ok {
+            FaultCode::Camera
+        } else if stalled {
+            FaultCode::PipelineStalled
+        } else if h.frames_processed > 0 && !h.stage.detector_ok {
+            FaultCode::Detector
+        } else if h.frames_processed > 0 && !h.stage.depth_ok {
+            FaultCode::Depth
+        } else if client && !plc_link_ok {
+            FaultCode::PlcLink
+        } else {
+            FaultCode::None
+        };
+        let nan = f64::NAN;
+        RegisterInputs {
+            mean_mps: sample.map_or(nan, |s| s.mean.get()),
+            mean_bls: sample.map_or(nan, |s| s.mean_body_lengths),
+            smoothed_mps: sample.map_or(nan, |s| s.smoothed.get()),
+            ci95_half_mps: sample.map_or(nan, |s| s.ci95_half.get()),
+            fish: sample.map_or(0, |s| s.fish),
+            status: bits,
+            fault,
+            heartbeat: self.heartbeat,
+            uptime_s: uptime.as_secs().min(u64::from(u32::MAX)) as u32,
+            camera_fps: h.camera_fps,
+            dropped: h.frames_dropped,
+            feeding,
+            detector_hz: h.stage.detector_hz,
+            depth_hz: h.stage.depth_hz,
+            value_age_s: age.map_or(f64::INFINITY, |a| a.as_secs_f64()),
+            feeding_ack,
+        }
+    }
+
+    /// Computes and publishes one update; returns the serial line to send (borrowed buffer). After a
+    /// `stopped` publish, later calls change nothing.
+    pub fn publish(&mut self, shared: &Shared, now: Instant, stopped: bool) -> &str {
+        if self.stopped {
+            return &self.line;
+        }
+        self.stopped = stopped;
+        let bank = &shared.bank;
+        let link = match self.mode {
+            ModbusMode::Off => false,
+            ModbusMode::TcpServer | ModbusMode::RtuServer => bank.served_within(SERVER_LINK_WINDOW),
+            ModbusMode::TcpClient | ModbusMode::RtuClient => bank.client_link_ok(),
+        };
+        let ack = bank.writable()[usize::from(registers::HR_FEEDING_ACK - registers::HR_WRITABLE_START)];
+        let inp = shared.with_health(|h| {
+            let inp = self.inputs(h, link, ack, now, stopped);
+            h.fault = inp.fault;
+            h.feeding = inp.feeding;
+            h.updates += 1;
+            inp
+        });
+        bank.publish(registers::encode(&inp, self.order));
+        self.last_publish = Some(now);
+        crate::output::serial_line::format_line(&inp, &mut self.line);
+        &self.line
+    }
+}

@@ -1,0 +1,141 @@
+//! The field console over a pseudo-terminal pair, inside a running daemon: commands answer, fuzzed
+//! input (binary noise, over-long lines, garbage) gets error lines and never kills the daemon.
+
+#[path = "daemon_support.rs"]
+mod support;
+
+use fme::capture::{FrameSource, RecordedSource};
+use fme::service::{self, Daemon, RunOptions};
+use serialport::SerialPort;
+use std::time::{Duration, Instant};
+
+/// Reads until the reply to one command is complete (a line `OK` or `ERR ...`) or 5 s pass.
+fn reply(port: &mut dyn SerialPort, acc: &mut String) -> String {
+    let end = Instant::now() + Duration::from_secs(5);
+    let mut buf = [0u8; 512];
+    loop {
+        if let Some(i) = acc
+            .find("OK\r\n")
+            .or_else(|| acc.find("ERR "))
+            .map(|i| acc[i..].find("\r\n").map_or(acc.len(), |j| i + j + 2))
+        {
+            let out = acc[..i].to_string();
+            acc.drain(..i);
+            return out;
+        }
+        assert!(Instant::now() < end, "no complete reply; got so far: {acc:?}");
+        match port.read(&mut buf) {
+            Ok(n) => acc.push_str(&String::from_utf8_lossy(&buf[..n])),
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+            Err(e) => panic!("read: {e}"),
+        }
+    }
+}
+
+/// Sends a command; returns the reply without the echoed command line.
+fn ask(port: &mut dyn SerialPort, acc: &mut String, cmd: &str) -> String {
+    port.write_all(cmd.as_bytes()).expect("write");
+    port.write_all(b"\r\n").expect("write");
+    let r = reply(port, acc);
+    let echo = format!("{cmd}\r\n");
+    // Streamed lines may come before the echo; everything else follows it.
+    assert!(r.contains(&echo), "typed characters are echoed: {r:?}");
+    r.replacen(&echo, "", 1)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn console_commands_and_fuzz() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    support::write_sequence(dir.path(), 30, 96, 64, 30);
+    let (mut master, slave) = serialport::TTYPort::pair().expect("pty pair");
+    master.set_timeout(Duration::from_millis(100)).expect("timeout");
+    let mut cfg = support::test_config(dir.path());
+    cfg.console.enabled = true;
+    cfg.console.device = slave.name().expect("pty name");
+    let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
+    let pipeline = service::build_pipeline(&cfg).expect("pipeline");
+    let daemon = Daemon::start(cfg, "[source]\nrealtime = true\n".into(), source, pipeline, RunOptions::default())
+        .await
+        .expect("start");
+    let shared = daemon.shared().clone();
+
+    let result = tokio::task::spawn_blocking(move || {
+        let port: &mut dyn SerialPort = &mut master;
+        let mut acc = String::new();
+        // The greeting arrives when the console opens the device.
+        let end = Instant::now() + Duration::from_secs(5);
+        let mut buf = [0u8; 256];
+        while !acc.contains("console ready") {
+            assert!(Instant::now() < end, "no greeting: {acc:?}");
+            if let Ok(n) = port.read(&mut buf) {
+                acc.push_str(&String::from_utf8_lossy(&buf[..n]));
+            }
+        }
+        acc.clear();
+        std::thread::sleep(Duration::from_millis(400)); // let a few samples through
+        let v = ask(port, &mut acc, "VERSION");
+        assert!(v.contains(env!("CARGO_PKG_VERSION")) && v.ends_with("OK\r\n"), "{v:?}");
+        let s = ask(port, &mut acc, "status");
+        assert!(s.contains("state running") && s.contains("camera-ok"), "{s:?}");
+        let a = ask(port, &mut acc, "Activity");
+        assert!(a.starts_with("activity ") && a.contains(" m/s"), "{a:?}");
+        let r = ask(port, &mut acc, "regs");
+        assert!(r.contains("12: ") && r.contains("hr100-103"), "{r:?}");
+        let c = ask(port, &mut acc, "counters");
+        assert!(c.contains("frames-processed") && c.contains("latency-p99"), "{c:?}");
+        let l = ask(port, &mut acc, "log 3");
+        assert!(l.lines().count() <= 4, "{l:?}");
+        assert!(ask(port, &mut acc, "calib").contains("not calibrated"));
+        assert!(ask(port, &mut acc, "tracks").starts_with("tracks "));
+        assert!(ask(port, &mut acc, "config").contains("realtime = true"));
+        assert!(ask(port, &mut acc, "help").contains("stream on|off"));
+        assert!(ask(port, &mut acc, "reboot").starts_with("ERR unknown command"));
+        let st = ask(port, &mut acc, "stream on");
+        assert!(st.ends_with("OK\r\n"));
+        std::thread::sleep(Duration::from_millis(500));
+        let streamed = ask(port, &mut acc, "stream off");
+        assert!(streamed.matches("activity ").count() >= 2, "stream prints updates: {streamed:?}");
+
+        // Fuzz: 64 KiB of pseudo-random bytes (xorshift), including CR/LF, NUL, 0xFF, huge lines.
+        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+        let mut junk = Vec::with_capacity(65_536);
+        for i in 0..65_536 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            junk.push(if i % 4000 == 3999 { b'\n' } else { (x >> 24) as u8 });
+        }
+        let mut drain = [0u8; 8192];
+        let mut drain_all = |port: &mut dyn SerialPort, acc: &mut String| {
+            // Read until the console has been quiet for one port timeout (100 ms).
+            while let Ok(n) = port.read(&mut drain) {
+                if n == 0 {
+                    break;
+                }
+                acc.push_str(&String::from_utf8_lossy(&drain[..n]));
+            }
+        };
+        for chunk in junk.chunks(2048) {
+            port.write_all(chunk).expect("write junk");
+            drain_all(port, &mut acc); // keep the pty buffers from filling
+        }
+        for _ in 0..5 {
+            port.write_all(&[b'x'; 1000]).expect("long line");
+            drain_all(port, &mut acc);
+        }
+        port.write_all(b"\r\n\r\n").expect("write");
+        drain_all(port, &mut acc);
+        assert!(acc.contains("ERR"), "fuzz must get error lines");
+        acc.clear();
+        let v = ask(port, &mut acc, "version");
+        assert!(v.contains(env!("CARGO_PKG_VERSION")), "console still answers after fuzz: {v:?}");
+    })
+    .await;
+    drop(slave);
+    let h = shared.health();
+    assert!(h.frames_processed > 0);
+    daemon.shutdown().await;
+    if let Err(e) = result {
+        std::panic::resume_unwind(e.into_panic());
+    }
+}

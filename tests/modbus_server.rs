@@ -1,0 +1,191 @@
+//! Modbus server roles against in-process clients: register reads, mirrored holding registers,
+//! exceptions for illegal addresses and functions, PLC-writable holding registers; TCP and RTU.
+
+#[path = "daemon_support.rs"]
+mod support;
+
+use fme::capture::{FrameSource, RecordedSource};
+use fme::config::{ModbusMode, WordOrder};
+use fme::output::bank::RegisterBank;
+use fme::output::modbus;
+use fme::output::registers::{self, RegisterInputs, decode_f32, status};
+use fme::service::{self, Daemon, RunOptions};
+use std::sync::Arc;
+use std::time::Duration;
+use tokio_modbus::ExceptionCode;
+use tokio_modbus::prelude::*;
+
+fn sample_bank() -> Arc<RegisterBank> {
+    let bank = Arc::new(RegisterBank::new());
+    let inp = RegisterInputs {
+        mean_mps: 0.125,
+        smoothed_mps: 0.25,
+        fish: 12,
+        status: status::RUNNING | status::CAMERA_OK,
+        heartbeat: 42,
+        feeding: true,
+        ..Default::default()
+    };
+    bank.publish(registers::encode(&inp, WordOrder::HighFirst));
+    bank
+}
+
+async fn start_tcp(bank: Arc<RegisterBank>) -> (std::net::SocketAddr, tokio::sync::oneshot::Sender<()>) {
+    let (listener, addr) = modbus::bind_tcp("127.0.0.1:0").await.expect("bind");
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    tokio::spawn(modbus::serve_tcp(listener, bank, async move {
+        let _ = rx.await;
+    }));
+    (addr, tx)
+}
+
+#[tokio::test]
+async fn tcp_reads_writes_and_exceptions() {
+    let bank = sample_bank();
+    let (addr, _stop) = start_tcp(bank.clone()).await;
+    let mut ctx = tcp::connect_slave(addr, Slave(1)).await.expect("connect");
+    let ir = ctx.read_input_registers(0, 24).await.expect("transport").expect("exception");
+    assert_eq!(ir, bank.block().to_vec());
+    assert_eq!(decode_f32([ir[0], ir[1]], WordOrder::HighFirst), 0.125);
+    assert_eq!(ir[8], 12);
+    assert_eq!(ir[12], 42);
+    let hr = ctx.read_holding_registers(0, 24).await.expect("transport").expect("exception");
+    assert_eq!(hr, ir, "holding registers mirror input registers");
+    let part = ctx.read_input_registers(8, 2).await.expect("transport").expect("exception");
+    assert_eq!(part, vec![12, 125]);
+    assert_eq!(ctx.read_coils(0, 1).await.expect("transport").expect("exception"), vec![true]);
+    assert_eq!(ctx.read_discrete_inputs(0, 1).await.expect("transport").expect("exception"), vec![true]);
+
+    // Out of the map: illegal data address, not silence or zeros.
+    let e = ctx.read_input_registers(20, 10).await.expect("transport");
+    assert_eq!(e, Err(ExceptionCode::IllegalDataAddress));
+    let e = ctx.read_input_registers(100, 1).await.expect("transport");
+    assert_eq!(e, Err(ExceptionCode::IllegalDataAddress), "HR 100 is not an input register");
+    // The block is read-only.
+    let e = ctx.write_single_register(10, 0).await.expect("transport");
+    assert_eq!(e, Err(ExceptionCode::IllegalDataAddress));
+    let e = ctx.write_multiple_registers(99, &[1, 2]).await.expect("transport");
+    assert_eq!(e, Err(ExceptionCode::IllegalDataAddress), "straddles into the read-only area");
+    let e = ctx.write_single_coil(0, true).await.expect("transport");
+    assert_eq!(e, Err(ExceptionCode::IllegalDataAddress));
+    assert_eq!(bank.block()[10], status::RUNNING | status::CAMERA_OK, "nothing was written");
+    // Unsupported function: illegal function.
+    let e = ctx.read_write_multiple_registers(0, 2, 100, &[1]).await.expect("transport");
+    assert_eq!(e, Err(ExceptionCode::IllegalFunction));
+    let e = ctx.masked_write_register(100, 0xFF, 0).await.expect("transport");
+    assert_eq!(e, Err(ExceptionCode::IllegalFunction));
+
+    // The PLC-writable holding registers.
+    ctx.write_single_register(registers::HR_FEEDING_ACK, 1).await.expect("transport").expect("exception");
+    ctx.write_multiple_registers(registers::HR_PLC_HEARTBEAT, &[7, 8, 9]).await.expect("transport").expect("exception");
+    assert_eq!(bank.writable(), [1, 7, 8, 9]);
+    let back = ctx.read_holding_registers(100, 4).await.expect("transport").expect("exception");
+    assert_eq!(back, vec![1, 7, 8, 9]);
+    let e = ctx.write_multiple_registers(102, &[1, 2, 3]).await.expect("transport");
+    assert_eq!(e, Err(ExceptionCode::IllegalDataAddress), "past the writable area");
+    // Quantity 0 is an illegal data value.
+    let e = ctx.read_input_registers(0, 0).await;
+    assert!(!matches!(e, Ok(Ok(_))), "zero-length read must not succeed: {e:?}");
+
+    let c = bank.counters();
+    assert!(c.requests >= 15 && c.exceptions >= 8, "{c:?}");
+    assert!(bank.served_within(Duration::from_secs(10)));
+}
+
+#[tokio::test]
+async fn tcp_server_sees_new_blocks_and_many_clients() {
+    let bank = sample_bank();
+    let (addr, stop) = start_tcp(bank.clone()).await;
+    let mut a = tcp::connect_slave(addr, Slave(1)).await.expect("connect a");
+    let mut b = tcp::connect_slave(addr, Slave(7)).await.expect("connect b (any unit id over TCP)");
+    let mut blk = bank.block();
+    blk[12] = 43;
+    bank.publish(blk);
+    assert_eq!(a.read_input_registers(12, 1).await.expect("t").expect("e"), vec![43]);
+    assert_eq!(b.read_input_registers(12, 1).await.expect("t").expect("e"), vec![43]);
+    let _ = stop.send(());
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    assert!(tcp::connect_slave(addr, Slave(1)).await.is_err(), "server stopped listening");
+}
+
+#[tokio::test]
+async fn rtu_server_over_pty_pair() {
+    let bank = sample_bank();
+    let (server_end, client_end) = tokio_serial::SerialStream::pair().expect("pty pair");
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    tokio::spawn(modbus::serve_rtu(server_end, bank.clone(), 5, async move {
+        let _ = rx.await;
+    }));
+    let mut ctx = rtu::attach_slave(client_end, Slave(5));
+    let ir = tokio::time::timeout(Duration::from_secs(2), ctx.read_input_registers(0, 24))
+        .await
+        .expect("rtu read timed out")
+        .expect("transport")
+        .expect("exception");
+    assert_eq!(ir, bank.block().to_vec());
+    let e = tokio::time::timeout(Duration::from_secs(2), ctx.write_single_register(3, 1)).await.expect("timeout");
+    assert_eq!(e.expect("transport"), Err(ExceptionCode::IllegalDataAddress));
+    // Another unit id on the bus: no reply at all.
+    ctx.set_slave(Slave(9));
+    let r = tokio::time::timeout(Duration::from_millis(300), ctx.read_input_registers(0, 1)).await;
+    assert!(r.is_err(), "a request for unit 9 must be ignored by unit 5: {r:?}");
+    let _ = tx.send(());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn daemon_rtu_server_role_and_missing_adapter() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    support::write_sequence(dir.path(), 20, 64, 48, 30);
+    // Adapter missing at start: the daemon runs anyway and keeps retrying.
+    let mut cfg = support::test_config(dir.path());
+    cfg.output.modbus.mode = ModbusMode::RtuServer;
+    cfg.output.modbus.serial_device = "/dev/ttyFME-absent".into();
+    cfg.output.modbus.reconnect_min_ms = 50;
+    let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
+    let d = Daemon::start(
+        cfg.clone(),
+        String::new(),
+        src,
+        service::build_pipeline(&cfg).expect("p"),
+        RunOptions::default(),
+    )
+    .await
+    .expect("start without the adapter");
+    let hb = d.shared().bank.block()[12];
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    assert_ne!(d.shared().bank.block()[12], hb, "running without the RS-485 adapter");
+    d.shutdown().await;
+
+    // With a device (one end of a pty pair; the PLC is on the other end).
+    use tokio_serial::SerialPort as _;
+    let (plc_end, box_end) = tokio_serial::SerialStream::pair().expect("pty pair");
+    cfg.output.modbus.serial_device = box_end.name().expect("pty name");
+    cfg.output.modbus.parity = fme::config::Parity::None;
+    cfg.output.modbus.unit_id = 4;
+    let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
+    let d = Daemon::start(
+        cfg.clone(),
+        String::new(),
+        src,
+        service::build_pipeline(&cfg).expect("p"),
+        RunOptions::default(),
+    )
+    .await
+    .expect("start");
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let mut ctx = rtu::attach_slave(plc_end, Slave(4));
+    let mut beats = Vec::new();
+    for _ in 0..3 {
+        let r = tokio::time::timeout(Duration::from_secs(2), ctx.read_input_registers(10, 3))
+            .await
+            .expect("rtu read timed out")
+            .expect("transport")
+            .expect("exception");
+        assert_ne!(r[0] & status::RUNNING, 0);
+        beats.push(r[2]);
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
+    assert!(beats.windows(2).all(|w| w[1] > w[0]), "heartbeat over RTU: {beats:?}");
+    d.shutdown().await;
+    drop(box_end);
+}
