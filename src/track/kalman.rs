@@ -33,7 +33,9 @@ pub fn box_to_z(b: &PixelBox) -> V4 {
 pub fn z_to_box(cx: f64, cy: f64, s: f64, r: f64) -> PixelBox {
     let w = (s * r).sqrt();
     let h = s / w;
-    PixelBox::new(cx - w / 2.0, cy - h / 2.0, w, h)
+    // Corners first, then size, in SORT's floating-point order (its output prints x2 - x1).
+    let (x1, y1, x2, y2) = (cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0);
+    PixelBox::new(x1, y1, x2 - x1, y2 - y1)
 }
 
 impl SortKalman {
