@@ -5,7 +5,9 @@ use fme::track::{Detection, MAX_DETS, MAX_TRACKS, Tracker, TrackerConfig};
 use fme::units::Seconds;
 
 fn grid(n: usize, score: impl Fn(usize) -> f64) -> Vec<Detection> {
-    (0..n).map(|i| Detection::new(PixelBox::new((i % 40) as f64 * 50.0, (i / 40) as f64 * 50.0, 30.0, 30.0), score(i))).collect()
+    (0..n)
+        .map(|i| Detection::new(PixelBox::new((i % 40) as f64 * 50.0, (i / 40) as f64 * 50.0, 30.0, 30.0), score(i)))
+        .collect()
 }
 
 #[test]

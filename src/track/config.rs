@@ -42,6 +42,12 @@ pub struct TrackerConfig {
     pub fuse_score: bool,
     /// Byte mode: weight of the relative depth difference in the cost (0 = depth unused).
     pub depth_weight: f64,
+    /// Byte mode: buffered IoU (C-BIoU, Yang et al. 2023): both boxes are widened by `b` times their
+    /// size on each side before the IoU, with `b = min(buffer_max, buffer_rate * time since the
+    /// track's last match)`, so that slow detection rates and lost tracks still overlap.
+    pub buffer_rate: f64,
+    /// Byte mode: largest buffer `b`.
+    pub buffer_max: f64,
     /// Byte mode: Kalman noise.
     pub noise: CvNoise,
 }
@@ -62,6 +68,8 @@ impl TrackerConfig {
             max_age_frames: 1,
             fuse_score: false,
             depth_weight: 0.0,
+            buffer_rate: 0.0,
+            buffer_max: 0.0,
             noise: CvNoise::default(),
         }
     }
@@ -81,6 +89,8 @@ impl TrackerConfig {
             max_age_frames: 30,
             fuse_score: false,
             depth_weight: 0.0,
+            buffer_rate: 3.0,
+            buffer_max: 0.5,
             noise: CvNoise::default(),
         }
     }
@@ -132,6 +142,9 @@ impl TrackerConfig {
         if !(self.depth_weight >= 0.0 && self.depth_weight.is_finite()) {
             return Err(ConfigError::Key("depth_weight".into(), format!("{} is not >= 0", self.depth_weight)));
         }
+        if !(self.buffer_rate >= 0.0 && self.buffer_max >= 0.0 && self.buffer_max.is_finite()) {
+            return Err(ConfigError::Key("buffer_rate".into(), "buffer_rate and buffer_max must be >= 0".into()));
+        }
         let n = self.noise;
         if !(n.meas > 0.0 && n.accel > 0.0 && n.init_vel > 0.0) {
             return Err(ConfigError::Key("noise".into(), "meas, accel and init_vel must be > 0".into()));
@@ -167,6 +180,8 @@ struct Patch {
     max_age_frames: Option<u32>,
     fuse_score: Option<bool>,
     depth_weight: Option<f64>,
+    buffer_rate: Option<f64>,
+    buffer_max: Option<f64>,
     noise: Option<CvNoise>,
 }
 
@@ -181,7 +196,7 @@ impl Patch {
             ($($k:ident),*) => { $( if let Some(v) = self.$k { c.$k = v; } )* };
         }
         set!(mode, det_thresh, track_thresh, new_track_thresh, iou_thresh, low_iou_thresh, unconfirmed_iou_thresh);
-        set!(min_hits, max_lost_s, max_age_frames, fuse_score, depth_weight, noise);
+        set!(min_hits, max_lost_s, max_age_frames, fuse_score, depth_weight, buffer_rate, buffer_max, noise);
         c.validate()?;
         Ok(c)
     }

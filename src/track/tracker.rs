@@ -449,6 +449,7 @@ impl Tracker {
         t: f64,
         min_iou: f64,
         fuse: bool,
+        buffered: bool,
         trk: impl Fn(&Track) -> bool,
         det: impl Fn(&Detection) -> bool,
     ) {
@@ -471,9 +472,11 @@ impl Tracker {
         let dw = self.cfg.depth_weight;
         for (a, &j) in self.rows.iter().enumerate() {
             let tr = &self.tracks[j as usize];
+            let buf = if buffered { (self.cfg.buffer_rate * (t - tr.t_last)).min(self.cfg.buffer_max) } else { 0.0 };
+            let tb = widen(&tr.pred, buf);
             for (b, &i) in self.cols.iter().enumerate() {
                 let d = &self.dets[i as usize];
-                let iou = tr.pred.iou(&d.bbox);
+                let iou = if buf > 0.0 { tb.iou(&widen(&d.bbox, buf)) } else { tr.pred.iou(&d.bbox) };
                 let c = if iou < min_iou {
                     BIG
                 } else {
@@ -521,14 +524,15 @@ impl Tracker {
         self.trk_used[..nt].fill(false);
         let hi = c.track_thresh;
         // 1: confirmed and lost tracks with high-score detections.
-        self.stage(t, c.iou_thresh, c.fuse_score, |tr| tr.state != TrackState::Tentative, |d| d.score >= hi);
+        self.stage(t, c.iou_thresh, c.fuse_score, true, |tr| tr.state != TrackState::Tentative, |d| d.score >= hi);
         // 2: still-tracked tracks with low-score detections (occluded fish score low).
-        self.stage(t, c.low_iou_thresh, false, |tr| tr.state == TrackState::Confirmed, |d| d.score < hi);
+        self.stage(t, c.low_iou_thresh, false, false, |tr| tr.state == TrackState::Confirmed, |d| d.score < hi);
         // 3: tentative tracks with the remaining high-score detections.
         self.stage(
             t,
             c.unconfirmed_iou_thresh,
             c.fuse_score,
+            true,
             |tr| tr.state == TrackState::Tentative,
             |d| d.score >= hi,
         );
@@ -561,6 +565,11 @@ impl Tracker {
             }
         }
     }
+}
+
+/// The box widened by `b` times its width and height on each side (C-BIoU's buffer).
+fn widen(p: &PixelBox, b: f64) -> PixelBox {
+    PixelBox::new(p.x - b * p.w, p.y - b * p.h, p.w * (1.0 + 2.0 * b), p.h * (1.0 + 2.0 * b))
 }
 
 /// SORT's `iou_batch` for one pair (corners, no clamping of the union).
