@@ -43,8 +43,8 @@ pub struct TrackerConfig {
     /// Byte mode: weight of the relative depth difference in the cost (0 = depth unused).
     pub depth_weight: f64,
     /// Byte mode: buffered IoU (C-BIoU, Yang et al. 2023): both boxes are widened by `b` times their
-    /// size on each side before the IoU, with `b = min(buffer_max, buffer_rate * time since the
-    /// track's last match)`, so that slow detection rates and lost tracks still overlap.
+    /// size on each side before the IoU, for tentative tracks, with `b = min(buffer_max, buffer_rate * time since the
+    /// track's last match)`, so that a new track can be confirmed at slow detection rates.
     pub buffer_rate: f64,
     /// Byte mode: largest buffer `b`.
     pub buffer_max: f64,
@@ -80,7 +80,7 @@ impl TrackerConfig {
             mode: Mode::Byte,
             det_thresh: 0.1,
             track_thresh: 0.5,
-            new_track_thresh: 0.6,
+            new_track_thresh: 0.8,
             iou_thresh: 0.2,
             low_iou_thresh: 0.5,
             unconfirmed_iou_thresh: 0.3,

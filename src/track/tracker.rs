@@ -472,7 +472,13 @@ impl Tracker {
         let dw = self.cfg.depth_weight;
         for (a, &j) in self.rows.iter().enumerate() {
             let tr = &self.tracks[j as usize];
-            let buf = if buffered { (self.cfg.buffer_rate * (t - tr.t_last)).min(self.cfg.buffer_max) } else { 0.0 };
+            // Only tentative tracks (velocity still unknown) get the buffer: on confirmed and lost
+            // tracks it caused wrong matches on mot15 (measured, see the README).
+            let buf = if buffered && tr.state == TrackState::Tentative {
+                (self.cfg.buffer_rate * (t - tr.t_last)).min(self.cfg.buffer_max)
+            } else {
+                0.0
+            };
             let tb = widen(&tr.pred, buf);
             for (b, &i) in self.cols.iter().enumerate() {
                 let d = &self.dets[i as usize];
@@ -524,7 +530,7 @@ impl Tracker {
         self.trk_used[..nt].fill(false);
         let hi = c.track_thresh;
         // 1: confirmed and lost tracks with high-score detections.
-        self.stage(t, c.iou_thresh, c.fuse_score, true, |tr| tr.state != TrackState::Tentative, |d| d.score >= hi);
+        self.stage(t, c.iou_thresh, c.fuse_score, false, |tr| tr.state != TrackState::Tentative, |d| d.score >= hi);
         // 2: still-tracked tracks with low-score detections (occluded fish score low).
         self.stage(t, c.low_iou_thresh, false, false, |tr| tr.state == TrackState::Confirmed, |d| d.score < hi);
         // 3: tentative tracks with the remaining high-score detections.
