@@ -49,6 +49,7 @@ pub mod assign;
 pub mod config;
 pub mod kalman;
 mod tracker;
+pub mod tune;
 
 pub use config::{ConfigError, Mode, TrackerConfig};
 pub use tracker::{Detection, MAX_DETS, MAX_TRACKS, TrackError, TrackOutput, TrackState, Tracker, TrackerStats};
