@@ -31,12 +31,12 @@ static A: Counting = Counting;
 fn frame(k: usize, out: &mut [Detection; 80]) -> usize {
     let mut n = 0;
     for i in 0..60 {
-        if (i + k) % 11 == 0 {
+        if (i + k).is_multiple_of(11) {
             continue; // missed detection
         }
         let x = (i % 10) as f64 * 100.0 + k as f64 * 1.5;
         let y = (i / 10) as f64 * 90.0 + (k as f64 * 0.1 + i as f64).sin() * 5.0;
-        let score = if (i + k) % 7 == 0 { 0.3 } else { 0.9 };
+        let score = if (i + k).is_multiple_of(7) { 0.3 } else { 0.9 };
         out[n] = Detection::new(PixelBox::new(x, y, 40.0, 30.0), score);
         n += 1;
     }

@@ -12,7 +12,7 @@ fn grid(n: usize, score: impl Fn(usize) -> f64) -> Vec<Detection> {
 
 #[test]
 fn detection_overflow_keeps_highest_scores() {
-    assert!(MAX_DETS >= 256 && MAX_TRACKS >= 128);
+    const { assert!(MAX_DETS >= 256 && MAX_TRACKS >= 128) };
     let mut cfg = TrackerConfig::default_preset();
     cfg.min_hits = 1;
     cfg.new_track_thresh = 0.0;

@@ -110,7 +110,8 @@ impl MotAccumulator {
             *self.ocs.entry(*oid).or_default() += 1;
             for (j, (hid, hb)) in hyp.iter().enumerate() {
                 let dist = 1.0 - ob.iou(hb);
-                if !(dist > self.max_dist) {
+                // NaN distances (degenerate boxes) never pair.
+                if dist <= self.max_dist {
                     d[i * nh + j] = dist;
                     *self.tps.entry((*oid, *hid)).or_default() += 1;
                 }
@@ -186,8 +187,8 @@ impl MotAccumulator {
     /// Adds a whole sequence of MOT rows (ground truth and hypotheses), frame by frame over
     /// `1..=max frame`.
     pub fn update_rows(&mut self, gt: &[MotRow], hyp: &[MotRow]) {
-        let mut by_frame: std::collections::BTreeMap<u32, (Vec<(i64, PixelBox)>, Vec<(i64, PixelBox)>)> =
-            std::collections::BTreeMap::new();
+        type Frame = (Vec<(i64, PixelBox)>, Vec<(i64, PixelBox)>);
+        let mut by_frame: std::collections::BTreeMap<u32, Frame> = std::collections::BTreeMap::new();
         for r in gt {
             by_frame.entry(r.frame).or_default().0.push((r.id, r.bbox));
         }

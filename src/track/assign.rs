@@ -98,9 +98,9 @@ fn solve_rows_le_cols(
             j0 = j1;
         }
     }
-    for j in 1..=m {
-        if p[j] != 0 {
-            emit(p[j] - 1, j - 1);
+    for (j, &row) in p.iter().enumerate().take(m + 1).skip(1) {
+        if row != 0 {
+            emit(row - 1, j - 1);
         }
     }
 }

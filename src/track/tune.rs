@@ -142,7 +142,7 @@ pub fn synth_detections(seq: &TuneSequence, noise: &DetNoise, seed: u64) -> Vec<
     }
     if noise.every > 1 {
         for (i, slot) in frames.iter_mut().enumerate() {
-            if i as u32 % noise.every != 0 {
+            if !(i as u32).is_multiple_of(noise.every) {
                 slot.clear();
             }
         }
