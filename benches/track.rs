@@ -50,14 +50,17 @@ fn main() {
     let dir = std::env::var("FME_MOT15").unwrap_or_else(|_| "/work/shared/benchmarks/mot15".into());
     let mut seqs = Vec::new();
     if let Ok(rd) = std::fs::read_dir(&dir) {
-        let mut paths: Vec<_> = rd.filter_map(|e| e.ok()).map(|e| e.path().join("det.txt")).filter(|p| p.is_file()).collect();
+        let mut paths: Vec<_> =
+            rd.filter_map(|e| e.ok()).map(|e| e.path().join("det.txt")).filter(|p| p.is_file()).collect();
         paths.sort();
         for p in paths {
             match io::read_file(&p, ReadOptions { require_sorted: true }) {
                 Ok(mut rows) => {
                     let frames = io::group_by_frame(&mut rows);
-                    let dets: Vec<Vec<Detection>> =
-                        frames.iter().map(|(_, r)| rows[r.clone()].iter().map(|d| Detection::new(d.bbox, d.score)).collect()).collect();
+                    let dets: Vec<Vec<Detection>> = frames
+                        .iter()
+                        .map(|(_, r)| rows[r.clone()].iter().map(|d| Detection::new(d.bbox, d.score)).collect())
+                        .collect();
                     seqs.push(dets);
                 }
                 Err(e) => eprintln!("skipping: {e}"),

@@ -60,3 +60,48 @@ fn cv_filter_learns_velocity_and_uses_real_dt() {
     k.predict(-1.0);
     assert_eq!(before, k);
 }
+
+#[test]
+fn cv_block_formulas_equal_the_dense_kalman_equations() {
+    use nalgebra::{SMatrix, SVector};
+    let mut k = CvKalman::new(&PixelBox::new(5.0, 7.0, 30.0, 50.0), CvNoise::default());
+    // A full, symmetric positive definite covariance and a non-zero velocity.
+    let a = SMatrix::<f64, 8, 8>::from_fn(|i, j| ((i * 7 + j * 3) % 5) as f64 * 0.3 + if i == j { 4.0 } else { 0.0 });
+    k.p = a * a.transpose();
+    k.x = SVector::<f64, 8>::from([20.0, 32.0, 30.0, 50.0, 3.0, -2.0, 0.5, 0.1]);
+    let (x0, p0) = (k.x, k.p);
+    let dt = 0.07;
+    k.predict(dt);
+    let mut f = SMatrix::<f64, 8, 8>::identity();
+    for i in 0..4 {
+        f[(i, i + 4)] = dt;
+    }
+    let q = (k.noise.accel * x0[3]).powi(2); // noise scaled by the height before the step
+    let mut qm = SMatrix::<f64, 8, 8>::zeros();
+    for i in 0..4 {
+        qm[(i, i)] = q * dt.powi(4) / 4.0;
+        qm[(i, i + 4)] = q * dt.powi(3) / 2.0;
+        qm[(i + 4, i)] = q * dt.powi(3) / 2.0;
+        qm[(i + 4, i + 4)] = q * dt * dt;
+    }
+    let xp = f * x0;
+    let pp = f * p0 * f.transpose() + qm;
+    assert!((k.x - xp).norm() < 1e-9);
+    assert!((k.p - pp).norm() < 1e-6 * pp.norm(), "{}", (k.p - pp).norm());
+    // Update: dense Kalman gain with H = [I 0].
+    let z = PixelBox::new(6.0, 8.0, 31.0, 49.0);
+    let mut h = SMatrix::<f64, 4, 8>::zeros();
+    for i in 0..4 {
+        h[(i, i)] = 1.0;
+    }
+    let sd = k.noise.meas * k.x[3];
+    let r = SMatrix::<f64, 4, 4>::from_diagonal_element(sd * sd);
+    let zm = nalgebra::Vector4::new(z.x + z.w / 2.0, z.y + z.h / 2.0, z.w, z.h);
+    let s = h * pp * h.transpose() + r;
+    let kg = pp * h.transpose() * s.try_inverse().expect("invertible");
+    let xu = k.x + kg * (zm - h * k.x);
+    let pu = (SMatrix::<f64, 8, 8>::identity() - kg * h) * pp;
+    k.update(&z);
+    assert!((k.x - xu).norm() < 1e-9);
+    assert!((k.p - pu).norm() < 1e-6 * pu.norm());
+}

@@ -145,6 +145,10 @@ pub struct Tracker {
     rows: heapless::Vec<u16, MAX_DETS>,
     cols: heapless::Vec<u16, MAX_DETS>,
     row_to_col: [usize; MAX_DETS],
+    cnt_r: [u16; MAX_DETS],
+    cnt_c: [u16; MAX_DETS],
+    rmap: [u16; MAX_DETS],
+    cmap: [u16; MAX_DETS],
     cost: Box<[f64]>,
     assigner: Box<FixedAssigner<ASSIGN_N>>,
     outputs: heapless::Vec<TrackOutput, MAX_TRACKS>,
@@ -172,6 +176,10 @@ impl Tracker {
             rows: heapless::Vec::new(),
             cols: heapless::Vec::new(),
             row_to_col: [UNASSIGNED; MAX_DETS],
+            cnt_r: [0; MAX_DETS],
+            cnt_c: [0; MAX_DETS],
+            rmap: [0; MAX_DETS],
+            cmap: [0; MAX_DETS],
             cost: vec![0.0; MAX_DETS * MAX_DETS].into_boxed_slice(),
             assigner: Box::default(),
             outputs: heapless::Vec::new(),
@@ -497,8 +505,7 @@ impl Tracker {
                 self.cost[a * nc + b] = c;
             }
         }
-        let cost = &self.cost[..nr * nc];
-        self.assigner.solve(&|a, b| cost[a * nc + b], nr, nc, &mut self.row_to_col);
+        self.solve_sparse(nr, nc);
         for a in 0..nr {
             let b = self.row_to_col[a];
             if b == UNASSIGNED || self.cost[a * nc + b] >= BIG {
@@ -519,6 +526,65 @@ impl Tracker {
                 TrackState::Tentative if tr.hits < min_hits => TrackState::Tentative,
                 _ => TrackState::Confirmed,
             };
+        }
+    }
+
+    /// Assignment on `cost[..nr * nc]` (entries `>= BIG` are forbidden) into `row_to_col`. Rows and
+    /// columns without any allowed entry are left out of the solve, and when no row or column has
+    /// two allowed entries the pairs are taken directly: the same optimum, much less work in sparse
+    /// scenes.
+    fn solve_sparse(&mut self, nr: usize, nc: usize) {
+        self.row_to_col[..nr].fill(UNASSIGNED);
+        self.cnt_c[..nc].fill(0);
+        let (mut max_r, mut max_c) = (0u16, 0u16);
+        for a in 0..nr {
+            let mut n = 0u16;
+            for b in 0..nc {
+                if self.cost[a * nc + b] < BIG {
+                    n += 1;
+                    self.cnt_c[b] += 1;
+                    max_c = max_c.max(self.cnt_c[b]);
+                }
+            }
+            self.cnt_r[a] = n;
+            max_r = max_r.max(n);
+        }
+        if max_r == 0 {
+            return;
+        }
+        if max_r == 1 && max_c == 1 {
+            for a in 0..nr {
+                if self.cnt_r[a] == 1 {
+                    self.row_to_col[a] = (0..nc).find(|&b| self.cost[a * nc + b] < BIG).unwrap_or(UNASSIGNED);
+                }
+            }
+            return;
+        }
+        let (mut rn, mut cn) = (0, 0);
+        for a in 0..nr {
+            if self.cnt_r[a] > 0 {
+                self.rmap[rn] = a as u16;
+                rn += 1;
+            }
+        }
+        for b in 0..nc {
+            if self.cnt_c[b] > 0 {
+                self.cmap[cn] = b as u16;
+                cn += 1;
+            }
+        }
+        let (cost, rmap, cmap) = (&self.cost, &self.rmap, &self.cmap);
+        let f = |a: usize, b: usize| cost[rmap[a] as usize * nc + cmap[b] as usize];
+        let mut reduced = [UNASSIGNED; MAX_TRACKS];
+        if rn <= MAX_TRACKS {
+            self.assigner.solve(&f, rn, cn, &mut reduced);
+            for a in 0..rn {
+                if reduced[a] != UNASSIGNED {
+                    self.row_to_col[rmap[a] as usize] = cmap[reduced[a]] as usize;
+                }
+            }
+        } else {
+            self.assigner.solve(&|a, b| cost[a * nc + b], nr, nc, &mut self.row_to_col);
         }
     }
 
