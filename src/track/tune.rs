@@ -313,6 +313,53 @@ impl Grid {
     }
 }
 
+/// A toy 2D swarm for tests and benchmarks (not the renderer of `fme synth`): `n` fish swimming at 30 fps in a 960 x 540 image: wandering headings, bouncing off the edges,
+/// nearer fish (larger) occlude farther ones; visibility is the uncovered fraction of the box.
+pub fn toy_swarm(n: usize, frames: u32, seed: u64) -> TuneSequence {
+    let mut rng = Rng::new(seed);
+    let (w_img, h_img) = (960.0, 540.0);
+    let mut fish: Vec<[f64; 5]> = (0..n)
+        .map(|_| {
+            let depth = 1.0 + 3.0 * rng.uniform();
+            [rng.uniform() * w_img, rng.uniform() * h_img, rng.uniform() * std::f64::consts::TAU, depth, 0.0]
+        })
+        .collect();
+    let mut gt = Vec::new();
+    for f in 1..=frames {
+        let mut boxes = Vec::new();
+        for (i, s) in fish.iter_mut().enumerate() {
+            s[2] += 0.15 * rng.normal();
+            let speed = 240.0 / s[3]; // px/s, nearer fish move faster on screen
+            s[0] += speed / 30.0 * s[2].cos();
+            s[1] += speed / 30.0 * s[2].sin();
+            if s[0] < 0.0 || s[0] > w_img {
+                s[2] = std::f64::consts::PI - s[2];
+                s[0] = s[0].clamp(0.0, w_img);
+            }
+            if s[1] < 0.0 || s[1] > h_img {
+                s[2] = -s[2];
+                s[1] = s[1].clamp(0.0, h_img);
+            }
+            let (bw, bh) = (160.0 / s[3], 70.0 / s[3]);
+            boxes.push((i, PixelBox::new(s[0] - bw / 2.0, s[1] - bh / 2.0, bw, bh), s[3]));
+        }
+        for &(i, b, z) in &boxes {
+            // Covered fraction by nearer fish, approximated by the largest single overlap.
+            let covered = boxes
+                .iter()
+                .filter(|o| o.2 < z)
+                .map(|o| {
+                    let iw = (b.right().min(o.1.right()) - b.x.max(o.1.x)).max(0.0);
+                    let ih = (b.bottom().min(o.1.bottom()) - b.y.max(o.1.y)).max(0.0);
+                    iw * ih / b.area()
+                })
+                .fold(0.0, f64::max);
+            gt.push(GtObs { frame: f, id: i as i64 + 1, bbox: b, visibility: 1.0 - covered, depth: Some(z) });
+        }
+    }
+    TuneSequence { name: format!("swarm{seed}"), fps: 30.0, frames, width: w_img, height: h_img, gt }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
