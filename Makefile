@@ -5,7 +5,7 @@ CARGO ?= cargo
 BIN := target/release/fme
 DEMO_OUT ?= target/demo
 
-.PHONY: all setup build test lint fmt clippy demo bench clean
+.PHONY: all setup build test lint fmt clippy demo bench bench-track clean
 
 all: build
 
@@ -32,6 +32,13 @@ demo: build
 
 bench: build
 	bash scripts/bench.sh
+
+# Tracker speed and quality; mot15 parity/quality need /work/shared/benchmarks/mot15 (and the
+# motmetrics venv for quality: see scripts/check_motmetrics.py).
+bench-track: build
+	$(CARGO) bench --locked --bench track
+	$(CARGO) bench --locked --bench track_quality
+	bash scripts/mot15_parity.sh $(BIN)
 
 clean:
 	$(CARGO) clean
