@@ -84,3 +84,27 @@ fn tracker_skips_invalid_detections_and_rejects_time_going_back() {
         assert!(t.update(Seconds(1.0), &[]).is_ok());
     }
 }
+
+#[test]
+fn bad_depths_are_dropped_not_fatal() {
+    use fme::units::Metres;
+    let mut cfg = TrackerConfig::default_preset();
+    cfg.depth_weight = 1.0;
+    let mut t = Tracker::new(cfg);
+    for k in 0..10 {
+        let depth = match k % 4 {
+            0 => Some(Metres(f64::NAN)),
+            1 => Some(Metres(-2.0)),
+            2 => Some(Metres(f64::INFINITY)),
+            _ => Some(Metres(2.0)),
+        };
+        let d = Detection { bbox: PixelBox::new(10.0 + k as f64, 10.0, 30.0, 20.0), score: 0.9, depth };
+        let out = t.update(Seconds(k as f64 / 30.0), &[d]).expect("ok");
+        if k >= 1 {
+            assert_eq!(out.len(), 1, "frame {k}");
+            assert_eq!(out[0].id, 1);
+            assert!(out[0].depth.is_none_or(|z| z.get() == 2.0));
+        }
+    }
+    assert_eq!(t.stats().invalid_dets, 0);
+}

@@ -289,6 +289,11 @@ impl Tracker {
             if d.score < self.cfg.det_thresh {
                 continue;
             }
+            let mut d = *d;
+            if d.depth.is_some_and(|z| !(z.get().is_finite() && z.get() > 0.0)) {
+                d.depth = None; // an unusable depth is dropped, the box is kept
+            }
+            let d = &d;
             if self.dets.push(*d).is_err() {
                 self.stats.det_overflow += 1;
                 let (mut lo, mut lo_i) = (f64::INFINITY, 0);
@@ -502,7 +507,8 @@ impl Tracker {
                     }
                     c
                 };
-                self.cost[a * nc + b] = c;
+                // A non-finite cost (bad depth) would break the solver's invariants: forbid the pair.
+                self.cost[a * nc + b] = if c.is_finite() { c } else { BIG };
             }
         }
         self.solve_sparse(nr, nc);
