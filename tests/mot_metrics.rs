@@ -88,3 +88,37 @@ fn fragmentation_and_assignment_maximises_matches() {
     }
     assert_eq!(acc.metrics().num_fragmentations, 1);
 }
+
+#[test]
+fn hota_known_answers() {
+    // Perfect tracking: HOTA = DetA = AssA = 1.
+    let mut acc = MotAccumulator::new();
+    for f in 0..4 {
+        acc.update(&[(1, b(f as f64))], &[(5, b(f as f64))]);
+    }
+    let m = acc.metrics();
+    assert!((m.hota - 1.0).abs() < 1e-12 && (m.deta - 1.0).abs() < 1e-12 && (m.assa - 1.0).abs() < 1e-12);
+    // One object, perfect boxes, identity split in half (HOTA paper's example): DetA 1,
+    // AssA = (2 * 2/4 + 2 * 2/4) / 4 = 0.5, HOTA = sqrt(0.5).
+    let mut acc = MotAccumulator::new();
+    for f in 0..4 {
+        acc.update(&[(1, b(0.0))], &[(if f < 2 { 1 } else { 2 }, b(0.0))]);
+    }
+    let m = acc.metrics();
+    assert!((m.deta - 1.0).abs() < 1e-12, "{m:?}");
+    assert!((m.assa - 0.5).abs() < 1e-12, "{m:?}");
+    assert!((m.hota - 0.5f64.sqrt()).abs() < 1e-12, "{m:?}");
+    // Half the frames detected, one identity: DetA 0.5, AssA = 2 / (4 + 2 - 2) = 0.5.
+    let mut acc = MotAccumulator::new();
+    for f in 0..4 {
+        let hyp: Vec<(i64, fme::geometry::PixelBox)> = if f < 2 { vec![(1, b(0.0))] } else { vec![] };
+        acc.update(&[(1, b(0.0))], &hyp);
+    }
+    let m = acc.metrics();
+    assert!((m.deta - 0.5).abs() < 1e-12 && (m.assa - 0.5).abs() < 1e-12, "{m:?}");
+    // IoU 2/3 (2 px shift of a 10 px box): TP for alpha <= 0.65 (13 of 19 alphas).
+    let mut acc = MotAccumulator::new();
+    acc.update(&[(1, b(0.0))], &[(1, b(2.0))]);
+    let m = acc.metrics();
+    assert!((m.deta - 13.0 / 19.0).abs() < 1e-12, "{m:?}");
+}

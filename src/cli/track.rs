@@ -79,12 +79,12 @@ pub fn score(gt: &[MotRow], hyp: &[MotRow]) -> MotMetrics {
 }
 
 /// One-line table header of [`metrics_line`].
-pub const METRICS_HEADER: &str = "  IDF1   MOTA   MOTP  IDSW    FP    FN  MT  ML   Rcll   Prcn";
+pub const METRICS_HEADER: &str = "  IDF1   MOTA   MOTP  IDSW    FP    FN  MT  ML   Rcll   Prcn   HOTA";
 
 /// The main metrics in one line, percentages (MOTP as motmetrics' mean 1 - IoU).
 pub fn metrics_line(m: &MotMetrics) -> String {
     format!(
-        "{:6.2} {:6.2} {:6.3} {:5} {:5} {:5} {:3} {:3} {:6.2} {:6.2}",
+        "{:6.2} {:6.2} {:6.3} {:5} {:5} {:5} {:3} {:3} {:6.2} {:6.2} {:6.2}",
         m.idf1 * 100.0,
         m.mota * 100.0,
         m.motp,
@@ -94,7 +94,8 @@ pub fn metrics_line(m: &MotMetrics) -> String {
         m.mostly_tracked,
         m.mostly_lost,
         m.recall * 100.0,
-        m.precision * 100.0
+        m.precision * 100.0,
+        m.hota * 100.0
     )
 }
 

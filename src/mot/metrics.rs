@@ -35,6 +35,7 @@ pub struct MotAccumulator {
     tracked: HashMap<i64, u64>,
     frag_state: HashMap<i64, (bool, bool)>,
     frags: u64,
+    hota: super::hota::HotaAccumulator,
 }
 
 /// Summary metrics of an accumulator (ratios in `[0, 1]`, MOTA may be negative).
@@ -84,6 +85,12 @@ pub struct MotMetrics {
     pub idr: f64,
     /// Identity F1.
     pub idf1: f64,
+    /// HOTA (mean over alpha; see [`super::hota`]).
+    pub hota: f64,
+    /// HOTA's detection accuracy.
+    pub deta: f64,
+    /// HOTA's association accuracy.
+    pub assa: f64,
 }
 
 fn ratio(a: f64, b: f64) -> f64 {
@@ -104,6 +111,7 @@ impl MotAccumulator {
     /// Adds one frame: ground-truth `(id, box)` and hypothesis `(id, box)` lists.
     pub fn update(&mut self, gt: &[(i64, PixelBox)], hyp: &[(i64, PixelBox)]) {
         self.frames += 1;
+        self.hota.update(gt, hyp);
         let (no, nh) = (gt.len(), hyp.len());
         let mut d = vec![f64::NAN; no * nh];
         for (i, (oid, ob)) in gt.iter().enumerate() {
@@ -217,6 +225,7 @@ impl MotAccumulator {
             }
         }
         let idtp = self.idtp();
+        let h = self.hota.compute();
         let (idfp, idfn) = (num_predictions - idtp, num_objects - idtp);
         MotMetrics {
             num_frames: self.frames,
@@ -241,6 +250,9 @@ impl MotAccumulator {
             idp: ratio(idtp as f64, num_predictions as f64),
             idr: ratio(idtp as f64, num_objects as f64),
             idf1: ratio(2.0 * idtp as f64, (num_objects + num_predictions) as f64),
+            hota: h.hota,
+            deta: h.deta,
+            assa: h.assa,
         }
     }
 

@@ -207,6 +207,10 @@ pub fn pooled(ms: &[MotMetrics]) -> MotMetrics {
         idp: r(idtp as f64, pred as f64),
         idr: r(idtp as f64, gt as f64),
         idf1: r(2.0 * idtp as f64, (gt + pred) as f64),
+        // HOTA does not pool from sums: ground-truth-weighted means of the sequences' values.
+        hota: r(ms.iter().map(|m| m.hota * m.num_objects as f64).sum(), gt as f64),
+        deta: r(ms.iter().map(|m| m.deta * m.num_objects as f64).sum(), gt as f64),
+        assa: r(ms.iter().map(|m| m.assa * m.num_objects as f64).sum(), gt as f64),
     }
 }
 
