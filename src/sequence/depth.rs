@@ -70,7 +70,7 @@ pub fn write_depth_png(path: &Path, depth: &DepthMap) -> Result<()> {
         bytes.extend_from_slice(&v.to_ne_bytes());
     }
     let mut out = Vec::with_capacity(n);
-    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Up)
+    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Paeth)
         .write_image(&bytes, depth.width, depth.height, image::ExtendedColorType::L16)
         .map_err(|source| Error::Image { path: path.into(), source })?;
     std::fs::write(path, out).map_err(|e| Error::io(path, e))
