@@ -99,6 +99,15 @@ pub fn metrics_line(m: &MotMetrics) -> String {
     )
 }
 
+/// Writes to stdout; a closed pipe (`fme ... | head`) is not an error, other failures are.
+pub fn write_stdout(text: &str) -> anyhow::Result<()> {
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(anyhow::Error::new(e).context("writing to stdout")),
+        _ => Ok(()),
+    }
+}
+
 /// Runs `fme track`.
 pub fn run(args: TrackArgs) -> anyhow::Result<()> {
     if !(args.fps > 0.0 && args.fps.is_finite()) {
@@ -125,11 +134,12 @@ pub fn run(args: TrackArgs) -> anyhow::Result<()> {
     if let Some(gt) = &args.gt {
         let gt = io::read_file(gt, ReadOptions::default())?;
         let m = score(&gt, &result);
-        if args.json {
-            println!("{}", serde_json::to_string(&m)?);
+        let text = if args.json {
+            format!("{}\n", serde_json::to_string(&m)?)
         } else {
-            println!("{METRICS_HEADER}\n{}", metrics_line(&m));
-        }
+            format!("{METRICS_HEADER}\n{}\n", metrics_line(&m))
+        };
+        write_stdout(&text)?;
     }
     Ok(())
 }

@@ -175,7 +175,10 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
         key(&b.1, args.metric).partial_cmp(&key(&a.1, args.metric)).unwrap_or(std::cmp::Ordering::Equal)
     });
     let frames: u32 = data.iter().map(|(s, _)| s.frames).sum();
-    println!(
+    use std::fmt::Write as _;
+    let mut rep = String::new();
+    writeln!(
+        rep,
         "fme tune: {} sequences, {frames} frames, {} grid points, metric {:?}, detections from ground truth (seed {}, miss {}, jitter {}, fp/frame {}, every {})",
         data.len(),
         grid.len(),
@@ -185,17 +188,18 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
         noise.jitter,
         noise.fp_per_frame,
         noise.every
-    );
-    println!("{:<8} {METRICS_HEADER}  settings", "rank");
+    )?;
+    writeln!(rep, "{:<8} {METRICS_HEADER}  settings", "rank")?;
     for (r, (set, m)) in results.iter().take(args.top).enumerate() {
         let s: Vec<String> = set.iter().map(|(k, v)| format!("{k}={v}")).collect();
-        println!("{:<8} {}  {}", r + 1, metrics_line(m), s.join(" "));
+        writeln!(rep, "{:<8} {}  {}", r + 1, metrics_line(m), s.join(" "))?;
     }
-    println!("{:<8} {}  (preset sort)", "sort", metrics_line(&score(TrackerConfig::sort())));
-    println!("{:<8} {}  (preset default)", "default", metrics_line(&score(TrackerConfig::default_preset())));
-    println!("# best settings, for --config:\n[track]\npreset = \"{}\"", args.preset);
+    writeln!(rep, "{:<8} {}  (preset sort)", "sort", metrics_line(&score(TrackerConfig::sort())))?;
+    writeln!(rep, "{:<8} {}  (preset default)", "default", metrics_line(&score(TrackerConfig::default_preset())))?;
+    writeln!(rep, "# best settings, for --config:\n[track]\npreset = \"{}\"", args.preset)?;
     for (k, v) in &results[0].0 {
-        println!("{k} = {v}");
+        writeln!(rep, "{k} = {v}")?;
     }
+    crate::cli::track::write_stdout(&rep)?;
     Ok(())
 }
