@@ -5,7 +5,7 @@ use crate::cli::track::{METRICS_HEADER, load_config, metrics_line};
 use crate::mot::MotMetrics;
 use crate::sequence::{Meta, SeqInfo, read_gt, read_world};
 use crate::track::TrackerConfig;
-use crate::track::tune::{DetNoise, Grid, GtObs, TuneSequence, evaluate, pooled, synth_detections};
+use crate::track::tune::{DetNoise, Grid, GtObs, TuneSequence, evaluate_with, pooled, synth_detections};
 use anyhow::Context;
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -139,10 +139,12 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
         let dets = synth_detections(&seq, &noise, args.seed.wrapping_add(k as u64));
         data.push((seq, dets));
     }
-    let score = |cfg: TrackerConfig| -> MotMetrics {
-        let ms: Vec<MotMetrics> = data.iter().map(|(s, d)| evaluate(cfg, s, d, noise.every)).collect();
+    // Grid points are ranked without HOTA (it stores every frame); the rows shown get it.
+    let score_with = |cfg: TrackerConfig, hota: bool| -> MotMetrics {
+        let ms: Vec<MotMetrics> = data.iter().map(|(s, d)| evaluate_with(cfg, s, d, noise.every, hota)).collect();
         pooled(&ms)
     };
+    let score = |cfg: TrackerConfig| score_with(cfg, true);
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(j) = args.jobs {
         pool = pool.num_threads(j.max(1));
@@ -160,7 +162,7 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
             .map(|i| {
                 let (cfg, set) = grid.point(i, base);
                 let valid = cfg.validate().is_ok();
-                let m = if valid { Some(score(cfg)) } else { None };
+                let m = if valid { Some(score_with(cfg, false)) } else { None };
                 bar.inc(1);
                 m.map(|m| (set, m))
             })
@@ -190,9 +192,13 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
         noise.every
     )?;
     writeln!(rep, "{:<8} {METRICS_HEADER}  settings", "rank")?;
-    for (r, (set, m)) in results.iter().take(args.top).enumerate() {
+    for (r, (set, _)) in results.iter().take(args.top).enumerate() {
         let s: Vec<String> = set.iter().map(|(k, v)| format!("{k}={v}")).collect();
-        writeln!(rep, "{:<8} {}  {}", r + 1, metrics_line(m), s.join(" "))?;
+        let mut cfg = base;
+        for (k, v) in set {
+            let _ = crate::track::tune::set_key(&mut cfg, k, *v);
+        }
+        writeln!(rep, "{:<8} {}  {}", r + 1, metrics_line(&score(cfg)), s.join(" "))?;
     }
     writeln!(rep, "{:<8} {}  (preset sort)", "sort", metrics_line(&score(TrackerConfig::sort())))?;
     writeln!(rep, "{:<8} {}  (preset default)", "default", metrics_line(&score(TrackerConfig::default_preset())))?;

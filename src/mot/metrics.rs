@@ -35,7 +35,7 @@ pub struct MotAccumulator {
     tracked: HashMap<i64, u64>,
     frag_state: HashMap<i64, (bool, bool)>,
     frags: u64,
-    hota: super::hota::HotaAccumulator,
+    hota: Option<super::hota::HotaAccumulator>,
 }
 
 /// Summary metrics of an accumulator (ratios in `[0, 1]`, MOTA may be negative).
@@ -85,7 +85,7 @@ pub struct MotMetrics {
     pub idr: f64,
     /// Identity F1.
     pub idf1: f64,
-    /// HOTA (mean over alpha; see [`super::hota`]).
+    /// HOTA (mean over alpha; see [`super::hota`]); NaN when not computed.
     pub hota: f64,
     /// HOTA's detection accuracy.
     pub deta: f64,
@@ -105,13 +105,22 @@ impl MotAccumulator {
 
     /// An accumulator with another pairing threshold on `1 - IoU`.
     pub fn with_max_distance(max_dist: f64) -> Self {
-        Self { max_dist, ..Self::default() }
+        Self { max_dist, hota: Some(Default::default()), ..Self::default() }
+    }
+
+    /// Skips HOTA (which keeps every frame for its second pass): the HOTA fields read NaN. For
+    /// grid searches, where only CLEAR and identity metrics rank the points.
+    pub fn without_hota(mut self) -> Self {
+        self.hota = None;
+        self
     }
 
     /// Adds one frame: ground-truth `(id, box)` and hypothesis `(id, box)` lists.
     pub fn update(&mut self, gt: &[(i64, PixelBox)], hyp: &[(i64, PixelBox)]) {
         self.frames += 1;
-        self.hota.update(gt, hyp);
+        if let Some(h) = &mut self.hota {
+            h.update(gt, hyp);
+        }
         let (no, nh) = (gt.len(), hyp.len());
         let mut d = vec![f64::NAN; no * nh];
         for (i, (oid, ob)) in gt.iter().enumerate() {
@@ -225,7 +234,12 @@ impl MotAccumulator {
             }
         }
         let idtp = self.idtp();
-        let h = self.hota.compute();
+        let h = self
+            .hota
+            .as_ref()
+            .map_or(super::hota::Hota { hota: f64::NAN, deta: f64::NAN, assa: f64::NAN, loca: f64::NAN }, |a| {
+                a.compute()
+            });
         let (idfp, idfn) = (num_predictions - idtp, num_objects - idtp);
         MotMetrics {
             num_frames: self.frames,
