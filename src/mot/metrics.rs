@@ -157,31 +157,42 @@ impl MotAccumulator {
         }
         // 2. Assignment on the rest: invalid pairs cost so much that cardinality comes first.
         let valid = |i: usize, j: usize| !o_done[i] && !h_done[j] && d[i * nh + j].is_finite();
-        let mut cmax: f64 = 0.0;
-        let mut any = false;
-        for i in 0..no {
-            for j in 0..nh {
-                if valid(i, j) {
-                    any = true;
-                    cmax = cmax.max(d[i * nh + j].abs());
-                }
+        // Only rows and columns with an allowed pair take part (same optimum, far smaller problems
+        // in sparse scenes); when no row or column has two allowed pairs they are taken directly.
+        let rows: Vec<usize> = (0..no).filter(|&i| (0..nh).any(|j| valid(i, j))).collect();
+        let cols: Vec<usize> = (0..nh).filter(|&j| (0..no).any(|i| valid(i, j))).collect();
+        let unique = rows.iter().all(|&i| (0..nh).filter(|&j| valid(i, j)).count() == 1)
+            && cols.iter().all(|&j| (0..no).filter(|&i| valid(i, j)).count() == 1);
+        let pairs: Vec<(usize, usize)> = if rows.is_empty() {
+            Vec::new()
+        } else if unique {
+            rows.iter().filter_map(|&i| (0..nh).find(|&j| valid(i, j)).map(|j| (i, j))).collect()
+        } else {
+            let cmax = rows
+                .iter()
+                .flat_map(|&i| cols.iter().map(move |&j| (i, j)))
+                .filter(|&(i, j)| valid(i, j))
+                .map(|(i, j)| d[i * nh + j].abs())
+                .fold(0.0, f64::max);
+            let large = 2.0 * rows.len().min(cols.len()) as f64 * (cmax + 1.0) + 1.0;
+            let cost = |a: usize, b: usize| {
+                let (i, j) = (rows[a], cols[b]);
+                if valid(i, j) { d[i * nh + j] } else { large }
+            };
+            let r2c = assign_vec(&cost, rows.len(), cols.len());
+            (0..rows.len())
+                .filter(|&a| r2c[a] != UNASSIGNED && valid(rows[a], cols[r2c[a]]))
+                .map(|a| (rows[a], cols[r2c[a]]))
+                .collect()
+        };
+        for (i, j) in pairs {
+            let o = gt[i].0;
+            if self.m.get(&o).is_some_and(|&h| h != hyp[j].0) {
+                self.switches += 1;
+            } else {
+                self.matches += 1;
             }
-        }
-        if any {
-            let large = 2.0 * no.min(nh) as f64 * (cmax + 1.0) + 1.0;
-            let cost = |i: usize, j: usize| if valid(i, j) { d[i * nh + j] } else { large };
-            let r2c = assign_vec(&cost, no, nh);
-            let pairs: Vec<(usize, usize)> =
-                (0..no).filter(|&i| r2c[i] != UNASSIGNED && valid(i, r2c[i])).map(|i| (i, r2c[i])).collect();
-            for (i, j) in pairs {
-                let o = gt[i].0;
-                if self.m.get(&o).is_some_and(|&h| h != hyp[j].0) {
-                    self.switches += 1;
-                } else {
-                    self.matches += 1;
-                }
-                matched(self, i, j, &mut o_done, &mut h_done);
-            }
+            matched(self, i, j, &mut o_done, &mut h_done);
         }
         // 3. Misses and false positives; fragmentation bookkeeping.
         for (i, (oid, _)) in gt.iter().enumerate() {
