@@ -68,6 +68,7 @@ fn tune_cli_runs_a_grid_on_sequence_folders() {
         miss: 0.05,
         jitter: 0.05,
         fp_per_frame: 0.5,
+        depth_noise: 0.05,
         every: 1,
         min_visibility: 0.1,
         top: 4,

@@ -53,6 +53,9 @@ pub struct TuneArgs {
     /// False positives per frame (mean).
     #[arg(long, default_value_t = 0.5)]
     pub fp_per_frame: f64,
+    /// Relative noise (standard deviation) of the depth attached to detections.
+    #[arg(long, default_value_t = 0.05)]
+    pub depth_noise: f64,
     /// Detect every k-th frame only.
     #[arg(long, default_value_t = 1)]
     pub every: u32,
@@ -121,6 +124,7 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
         ("--miss", args.miss, (0.0..=1.0).contains(&args.miss)),
         ("--jitter", args.jitter, (0.0..=1.0).contains(&args.jitter)),
         ("--fp-per-frame", args.fp_per_frame, (0.0..=100.0).contains(&args.fp_per_frame)),
+        ("--depth-noise", args.depth_noise, (0.0..=1.0).contains(&args.depth_noise)),
     ] {
         if !ok {
             return Err(UsageError(format!("{what} {v} is out of range")).into());
@@ -131,7 +135,7 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
         jitter: args.jitter,
         fp_per_frame: args.fp_per_frame,
         every: args.every.max(1),
-        ..DetNoise::default()
+        depth_noise: args.depth_noise,
     };
     let mut data = Vec::new();
     for (k, dir) in args.sequences.iter().enumerate() {
