@@ -82,6 +82,11 @@ fn tracker_skips_invalid_detections_and_rejects_time_going_back() {
         assert!(t.update(Seconds(-1.0), &[]).is_err());
         assert!(t.update(Seconds(f64::NAN), &[]).is_err());
         assert!(t.update(Seconds(1.0), &[]).is_ok());
+        // Predicting ahead (a frame without detection) then updating at that time is fine; updating
+        // before the predicted time is an error.
+        t.predict(Seconds(2.0)).expect("predict");
+        assert!(t.update(Seconds(1.5), &[]).is_err());
+        assert!(t.update(Seconds(2.0), &[]).is_ok());
     }
 }
 

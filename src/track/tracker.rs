@@ -266,6 +266,10 @@ impl Tracker {
     /// Processes the detections of the frame at time `t`: predicts (if not done for `t`),
     /// associates, updates, starts and ends tracks, and refreshes [`Tracker::outputs`].
     pub fn update(&mut self, t: Seconds, detections: &[Detection]) -> Result<&[TrackOutput], TrackError> {
+        if let Some(p) = self.predicted_t.filter(|&p| p > t.get()) {
+            // The filters were already propagated past `t`: updating in their past is not possible.
+            return Err(TrackError::TimeNotIncreasing { t: t.get(), prev: p });
+        }
         self.predict(t)?;
         let t = t.get();
         self.last_t = Some(t);
