@@ -26,6 +26,11 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn main() {
+    // `cargo test --all-targets` also runs bench targets: measure only under `cargo bench`.
+    if !std::env::args().any(|a| a == "--bench") {
+        println!("benchmark: run with `cargo bench --bench {}`", env!("CARGO_CRATE_NAME"));
+        return;
+    }
     println!("update time per frame (steady state, 2000 frames after 100 warm-up, median of 5):");
     for (name, cfg) in [("sort", TrackerConfig::sort()), ("default", TrackerConfig::default_preset())] {
         for n in [10usize, 50, 200] {

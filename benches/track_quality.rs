@@ -30,6 +30,11 @@ fn line(label: &str, m: &MotMetrics) {
 }
 
 fn main() {
+    // `cargo test --all-targets` also runs bench targets: measure only under `cargo bench`.
+    if !std::env::args().any(|a| a == "--bench") {
+        println!("benchmark: run with `cargo bench --bench {}`", env!("CARGO_CRATE_NAME"));
+        return;
+    }
     let noise = DetNoise { miss: 0.1, jitter: 0.04, fp_per_frame: 1.0, ..DetNoise::default() };
     for fish in [10, 25, 50] {
         println!("toy swarm, {fish} fish, 300 frames x 3 seeds, miss 0.1, jitter 0.04, 1 FP/frame");
