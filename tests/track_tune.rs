@@ -73,13 +73,31 @@ fn tune_cli_runs_a_grid_on_sequence_folders() {
         min_visibility: 0.1,
         top: 4,
         quiet: true,
+        detections: None,
     };
-    run(args(Some(grid))).expect("tune runs");
+    run(args(Some(grid.clone()))).expect("tune runs");
     let bad = dir.path().join("bad.toml");
     std::fs::write(&bad, "iou = [0.2]\n").expect("write");
     let err = run(args(Some(bad))).expect_err("unknown key");
     assert!(format!("{err:#}").contains("unknown grid key `iou`"), "{err:#}");
     assert_eq!(fme::cli::exit_code(&err), 2);
+    // Real detections from a file in the sequence folder.
+    std::fs::create_dir_all(sdir.join("det")).expect("mkdir");
+    let mut det = String::new();
+    for g in &seq.gt {
+        let b = g.bbox;
+        writeln!(det, "{},-1,{},{},{},{},0.9,-1,-1,-1", g.frame, b.x, b.y, b.w, b.h).expect("fmt");
+    }
+    std::fs::write(sdir.join("det").join("det.txt"), &det).expect("write");
+    let mut a = args(None);
+    a.grid = Some(grid.clone());
+    a.detections = Some("det/det.txt".into());
+    run(a).expect("tune on real detections");
+    let d = fme::cli::tune::read_detections(&sdir.join("det").join("det.txt"), 60).expect("reads");
+    assert_eq!(d.iter().map(Vec::len).sum::<usize>(), seq.gt.len());
+    std::fs::write(sdir.join("det").join("det.txt"), format!("{det}61,-1,1,1,5,5,0.9\n")).expect("write");
+    let err = fme::cli::tune::read_detections(&sdir.join("det").join("det.txt"), 60).expect_err("beyond");
+    assert!(format!("{err:#}").contains("frame 61 is beyond"), "{err:#}");
     let mut a = args(None);
     a.sequences = vec![dir.path().join("nope")];
     let err = run(a).expect_err("missing folder");

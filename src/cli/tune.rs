@@ -68,6 +68,10 @@ pub struct TuneArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Use real detections instead of synthetic ones: a MOTChallenge file at this path inside each
+    /// sequence folder (e.g. `det/det.txt`, as the detector writes it).
+    #[arg(long)]
+    pub detections: Option<PathBuf>,
 }
 
 /// Loads a sequence's ground truth (and true depths when `meta.json` and `gt/world.csv` exist).
@@ -101,6 +105,25 @@ pub fn load_sequence(dir: &Path, min_visibility: f64) -> anyhow::Result<TuneSequ
         height: f64::from(info.im_height),
         gt,
     })
+}
+
+/// Reads a MOTChallenge detection file into per-frame lists (index 0 = frame 1); rows beyond
+/// `frames` are an error naming the file and line.
+pub fn read_detections(path: &Path, frames: u32) -> anyhow::Result<Vec<Vec<crate::track::Detection>>> {
+    let rows = crate::mot::io::read_file(path, crate::mot::ReadOptions::default())?;
+    let mut out = vec![Vec::new(); frames as usize];
+    for (k, r) in rows.iter().enumerate() {
+        let slot = out.get_mut(r.frame as usize - 1).ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: row {}: frame {} is beyond the sequence's {frames} frames",
+                path.display(),
+                k + 1,
+                r.frame
+            )
+        })?;
+        slot.push(crate::track::Detection::new(r.bbox, r.score));
+    }
+    Ok(out)
 }
 
 fn key(m: &MotMetrics, metric: TuneMetric) -> (f64, f64) {
@@ -140,7 +163,10 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
     let mut data = Vec::new();
     for (k, dir) in args.sequences.iter().enumerate() {
         let seq = load_sequence(dir, args.min_visibility).with_context(|| format!("loading {}", dir.display()))?;
-        let dets = synth_detections(&seq, &noise, args.seed.wrapping_add(k as u64));
+        let dets = match &args.detections {
+            Some(rel) => read_detections(&dir.join(rel), seq.frames)?,
+            None => synth_detections(&seq, &noise, args.seed.wrapping_add(k as u64)),
+        };
         data.push((seq, dets));
     }
     // Grid points are ranked without HOTA (it stores every frame); the rows shown get it.
@@ -185,10 +211,14 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
     let mut rep = String::new();
     writeln!(
         rep,
-        "fme tune: {} sequences, {frames} frames, {} grid points, metric {:?}, detections from ground truth (seed {}, miss {}, jitter {}, fp/frame {}, every {})",
+        "fme tune: {} sequences, {frames} frames, {} grid points, metric {:?}, {} (seed {}, miss {}, jitter {}, fp/frame {}, every {})",
         data.len(),
         grid.len(),
         args.metric,
+        match &args.detections {
+            Some(p) => format!("detections from <sequence>/{}", p.display()),
+            None => "detections from ground truth".into(),
+        },
         args.seed,
         noise.miss,
         noise.jitter,
