@@ -112,3 +112,20 @@ fn sort_output_rule_warm_up_and_min_hits() {
     }
     assert_eq!(counts, vec![2, 2]);
 }
+
+#[test]
+fn confirmed_tracks_follow_predictions_between_detections() {
+    let mut tr = Tracker::new(TrackerConfig::default_preset());
+    for k in 0..10 {
+        let t = k as f64 / 30.0;
+        tr.update(Seconds(t), &[moving(t, 0.0, 90.0, 0.9)]).expect("ok");
+    }
+    let at_update = tr.confirmed().next().expect("one track");
+    // No detection for the next frame: predict only; the box moves on by ~3 px, outputs() stays.
+    tr.predict(Seconds(10.0 / 30.0)).expect("ok");
+    let predicted = tr.confirmed().next().expect("one track");
+    assert_eq!(predicted.id, at_update.id);
+    assert!((predicted.bbox.x - at_update.bbox.x - 3.0).abs() < 0.5, "{} -> {}", at_update.bbox.x, predicted.bbox.x);
+    assert!(predicted.age.get() > at_update.age.get());
+    assert_eq!(tr.outputs()[0].bbox, at_update.bbox);
+}

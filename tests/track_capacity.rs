@@ -45,3 +45,17 @@ fn sort_preset_overflow_does_not_panic() {
     assert!(t.live_tracks() <= MAX_TRACKS);
     assert_eq!(t.stats().det_overflow, 5 * (1000 - MAX_DETS as u64));
 }
+
+#[test]
+fn configured_max_tracks_caps_below_capacity() {
+    let mut cfg = TrackerConfig::default_preset();
+    cfg.max_tracks = 10;
+    cfg.min_hits = 1;
+    cfg.new_track_thresh = 0.0;
+    let mut t = Tracker::new(cfg);
+    let dets = grid(30, |i| 0.9 - i as f64 / 100.0);
+    let out = t.update(Seconds(0.0), &dets).expect("ok").to_vec();
+    assert_eq!(out.len(), 10);
+    assert_eq!(t.live_tracks(), 10);
+    assert_eq!(t.stats().track_overflow, 20);
+}

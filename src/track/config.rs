@@ -50,6 +50,8 @@ pub struct TrackerConfig {
     pub buffer_max: f64,
     /// Byte mode: Kalman noise.
     pub noise: CvNoise,
+    /// Most live tracks, at most [`super::MAX_TRACKS`] (the compiled capacity).
+    pub max_tracks: usize,
 }
 
 impl TrackerConfig {
@@ -71,6 +73,7 @@ impl TrackerConfig {
             buffer_rate: 0.0,
             buffer_max: 0.0,
             noise: CvNoise::default(),
+            max_tracks: super::MAX_TRACKS,
         }
     }
 
@@ -92,6 +95,7 @@ impl TrackerConfig {
             buffer_rate: 3.0,
             buffer_max: 0.5,
             noise: CvNoise::default(),
+            max_tracks: super::MAX_TRACKS,
         }
     }
 
@@ -145,6 +149,12 @@ impl TrackerConfig {
         if !(self.buffer_rate >= 0.0 && self.buffer_max >= 0.0 && self.buffer_max.is_finite()) {
             return Err(ConfigError::Key("buffer_rate".into(), "buffer_rate and buffer_max must be >= 0".into()));
         }
+        if self.max_tracks == 0 || self.max_tracks > super::MAX_TRACKS {
+            return Err(ConfigError::Key(
+                "max_tracks".into(),
+                format!("{} is not in 1..={}", self.max_tracks, super::MAX_TRACKS),
+            ));
+        }
         let n = self.noise;
         if !(n.meas > 0.0 && n.accel > 0.0 && n.init_vel > 0.0) {
             return Err(ConfigError::Key("noise".into(), "meas, accel and init_vel must be > 0".into()));
@@ -172,10 +182,12 @@ struct Patch {
     det_thresh: Option<f64>,
     track_thresh: Option<f64>,
     new_track_thresh: Option<f64>,
+    #[serde(alias = "iou_threshold")]
     iou_thresh: Option<f64>,
     low_iou_thresh: Option<f64>,
     unconfirmed_iou_thresh: Option<f64>,
     min_hits: Option<u32>,
+    #[serde(alias = "max_age_s")]
     max_lost_s: Option<f64>,
     max_age_frames: Option<u32>,
     fuse_score: Option<bool>,
@@ -183,6 +195,7 @@ struct Patch {
     buffer_rate: Option<f64>,
     buffer_max: Option<f64>,
     noise: Option<CvNoise>,
+    max_tracks: Option<usize>,
 }
 
 impl Patch {
@@ -196,7 +209,17 @@ impl Patch {
             ($($k:ident),*) => { $( if let Some(v) = self.$k { c.$k = v; } )* };
         }
         set!(mode, det_thresh, track_thresh, new_track_thresh, iou_thresh, low_iou_thresh, unconfirmed_iou_thresh);
-        set!(min_hits, max_lost_s, max_age_frames, fuse_score, depth_weight, buffer_rate, buffer_max, noise);
+        set!(
+            min_hits,
+            max_lost_s,
+            max_age_frames,
+            fuse_score,
+            depth_weight,
+            buffer_rate,
+            buffer_max,
+            noise,
+            max_tracks
+        );
         c.validate()?;
         Ok(c)
     }
@@ -215,6 +238,14 @@ mod tests {
         assert_eq!(c.iou_thresh, 0.5);
         let e = TrackerConfig::from_toml("iou_tresh = 0.5", TrackerConfig::sort()).expect_err("typo");
         assert!(e.to_string().contains("iou_tresh"), "{e}");
+        // The daemon's `[tracker]` names are accepted as aliases.
+        let c = TrackerConfig::from_toml(
+            "[track]\niou_threshold = 0.4\nmax_age_s = 2.0\nmax_tracks = 64\n",
+            TrackerConfig::default_preset(),
+        )
+        .expect("aliases");
+        assert_eq!((c.iou_thresh, c.max_lost_s, c.max_tracks), (0.4, 2.0, 64));
+        assert!(TrackerConfig::from_toml("max_tracks = 129", TrackerConfig::sort()).is_err());
         let e = TrackerConfig::from_toml("iou_thresh = 1.5", TrackerConfig::sort()).expect_err("range");
         assert!(e.to_string().contains("iou_thresh"), "{e}");
     }

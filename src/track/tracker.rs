@@ -212,6 +212,19 @@ impl Tracker {
         &self.outputs
     }
 
+    /// The tracks reported at the last update, with their box at the last predicted time (after
+    /// [`Tracker::predict`] on a frame without detections, the propagated box) and age up to it.
+    pub fn confirmed(&self) -> impl Iterator<Item = TrackOutput> + '_ {
+        let now = self.predicted_t.unwrap_or(0.0);
+        self.outputs.iter().filter_map(move |o| {
+            self.tracks.iter().find(|t| t.id == o.id).map(|t| TrackOutput {
+                bbox: t.bbox(),
+                age: Seconds(now - t.t_first),
+                ..*o
+            })
+        })
+    }
+
     /// Predicted boxes of all confirmed and lost tracks at the last predicted time (for a daemon
     /// that detects every k-th frame): `(id, box)`.
     pub fn predictions(&self) -> impl Iterator<Item = (u32, PixelBox)> + '_ {
@@ -315,7 +328,7 @@ impl Tracker {
     }
 
     fn new_track(&mut self, t: f64, d: &Detection) {
-        if self.tracks.is_full() {
+        if self.tracks.is_full() || self.tracks.len() >= self.cfg.max_tracks {
             // Make room by evicting the longest-lost track, if any.
             let victim = self
                 .tracks
