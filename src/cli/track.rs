@@ -15,7 +15,8 @@ pub struct TrackArgs {
     /// MOTChallenge detections `frame,-1,x,y,w,h,score,...` (sorted by frame).
     #[arg(long, required_unless_present = "hyp")]
     pub det: Option<PathBuf>,
-    /// Where to write the tracks `frame,id,x,y,w,h,score,-1,-1,-1`.
+    /// Where to write the tracks `frame,id,x,y,w,h,score,-1,-1,-1` (stdout when neither `--out`
+    /// nor `--gt` is given).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Tracker preset: `sort` (exact SORT) or `default`.
@@ -128,6 +129,13 @@ pub fn run(args: TrackArgs) -> anyhow::Result<()> {
                     .with_context(|| format!("writing {}", out.display()))?;
             }
             w.flush().with_context(|| format!("writing {}", out.display()))?;
+        } else if args.gt.is_none() {
+            // Neither a file nor a score asked for: the tracks go to stdout.
+            let mut text = Vec::new();
+            for r in &rows {
+                io::write_row(&mut text, r.frame, r.id as u32, &r.bbox, r.score)?;
+            }
+            write_stdout(&String::from_utf8_lossy(&text))?;
         }
         rows
     };

@@ -21,7 +21,7 @@ pub struct MotRow {
 #[derive(Debug, thiserror::Error)]
 pub enum MotError {
     /// The file could not be read.
-    #[error("{path}: {source}")]
+    #[error("reading {path}")]
     Io {
         /// The file.
         path: PathBuf,
