@@ -61,11 +61,12 @@ fn main() {
         for p in paths {
             match io::read_file(&p, ReadOptions { require_sorted: true }) {
                 Ok(mut rows) => {
-                    let frames = io::group_by_frame(&mut rows);
-                    let dets: Vec<Vec<Detection>> = frames
-                        .iter()
-                        .map(|(_, r)| rows[r.clone()].iter().map(|d| Detection::new(d.bbox, d.score)).collect())
-                        .collect();
+                    // Every frame 1..=last, empty ones included (as SORT's loop runs them).
+                    let last = rows.iter().map(|r| r.frame).max().unwrap_or(0) as usize;
+                    let mut dets: Vec<Vec<Detection>> = vec![Vec::new(); last];
+                    for (f, r) in io::group_by_frame(&mut rows) {
+                        dets[f as usize - 1] = rows[r].iter().map(|d| Detection::new(d.bbox, d.score)).collect();
+                    }
                     seqs.push(dets);
                 }
                 Err(e) => eprintln!("skipping: {e}"),

@@ -28,6 +28,10 @@ fn cli_errors_name_file_and_line() {
         ("1,-1,10,10,5,5,0.9\n2,-1,10,NaN,5,5,0.9\n", ":2: y is NaN"),
         ("1,-1,10,10,5,5,0.9\n1,-1,10,10,5,5,x\n", ":2: score `x` is not a number"),
         ("2,-1,10,10,5,5,0.9\n3,-1,10,10,5,5,0.9\n1,-1,10,10,5,5,0.9\n", ":3: frame 1 comes after frame 3"),
+        (
+            "1,-1,10,10,5,5,0.9\n4294967296,-1,10,10,5,5,0.9\n",
+            ":2: frame 4294967296 is not a whole number in 1..=4294967295",
+        ),
     ];
     for (i, (text, want)) in cases.iter().enumerate() {
         let det = dir.path().join(format!("det{i}.txt"));
@@ -42,6 +46,21 @@ fn cli_errors_name_file_and_line() {
     a.preset = "bogus".into();
     let err = run(a).expect_err("preset");
     assert_eq!(fme::cli::exit_code(&err), 2);
+}
+
+#[test]
+fn huge_frame_numbers_neither_allocate_nor_overflow() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let det = dir.path().join("det.txt");
+    std::fs::write(&det, "1,-1,1,1,5,5,0.9\n4294967295,-1,1,1,5,5,0.9\n").expect("write");
+    for preset in ["sort", "default"] {
+        let out = dir.path().join(format!("{preset}.txt"));
+        let mut a = args(det.clone(), out.clone());
+        a.preset = preset.into();
+        run(a).expect("runs");
+        let text = std::fs::read_to_string(out).expect("read");
+        assert!(text.lines().all(|l| l.starts_with("1,") || l.starts_with("4294967295,")), "{text}");
+    }
 }
 
 #[test]

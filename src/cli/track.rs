@@ -53,12 +53,29 @@ pub fn track_rows(cfg: TrackerConfig, dets: &mut [MotRow], fps: f64) -> anyhow::
     let mut tracker = Tracker::new(cfg);
     let mut out = Vec::new();
     let mut frame_dets: Vec<Detection> = Vec::with_capacity(crate::track::MAX_DETS);
-    for (frame, range) in io::group_by_frame(dets) {
+    let groups = io::group_by_frame(dets);
+    let mut next = 0usize;
+    let last = groups.last().map_or(0, |g| g.0);
+    let mut frame = 1u32;
+    while frame <= last {
         frame_dets.clear();
-        frame_dets.extend(dets[range].iter().map(|r| Detection::new(r.bbox, r.score)));
+        if groups.get(next).is_some_and(|g| g.0 == frame) {
+            frame_dets.extend(dets[groups[next].1.clone()].iter().map(|r| Detection::new(r.bbox, r.score)));
+            next += 1;
+        } else if tracker.live_tracks() == 0 && frame > cfg.min_hits.saturating_add(1) {
+            // Nothing alive and past SORT's warm-up: empty frames change nothing, jump ahead.
+            match groups.get(next) {
+                Some(g) => frame = g.0,
+                None => break,
+            }
+            continue;
+        }
+        // Frames without detections still run (tracks age and get lost, as in SORT's loop).
         let t = Seconds(f64::from(frame - 1) / fps);
         let tracks = tracker.update(t, &frame_dets).with_context(|| format!("frame {frame}"))?;
         out.extend(tracks.iter().map(|o| MotRow { frame, id: i64::from(o.id), bbox: o.bbox, score: o.score }));
+        let Some(f) = frame.checked_add(1) else { break };
+        frame = f;
     }
     let s = tracker.stats();
     if s.det_overflow + s.track_overflow + s.invalid_dets > 0 {

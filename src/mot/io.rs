@@ -70,7 +70,7 @@ pub fn parse_line(text: &str) -> Result<Option<MotRow>, String> {
     let h = need(num("height")?, "height")?;
     let score = num("score")?.unwrap_or(1.0);
     if !(frame.fract() == 0.0 && frame >= 1.0 && frame <= f64::from(u32::MAX)) {
-        return Err(format!("frame {frame} is not a whole number >= 1"));
+        return Err(format!("frame {frame} is not a whole number in 1..={}", u32::MAX));
     }
     if !(id.fract() == 0.0 && id.abs() < 9.0e15) {
         return Err(format!("id {id} is not a whole number"));
@@ -109,19 +109,17 @@ pub fn read_file(path: &Path, opts: ReadOptions) -> Result<Vec<MotRow>, MotError
     read_rows(std::io::BufReader::new(f), path, opts)
 }
 
-/// Sorts rows by frame (stable) and returns `(frame, range)` for every frame in `1..=last`,
-/// empty ranges included, so that a caller sees every frame.
+/// Sorts rows by frame (stable) and returns `(frame, range)` for every frame that has rows, in
+/// increasing frame order (frames without rows are absent; memory stays proportional to the rows
+/// even for absurd frame numbers).
 pub fn group_by_frame(rows: &mut [MotRow]) -> Vec<(u32, std::ops::Range<usize>)> {
     rows.sort_by_key(|r| r.frame);
-    let last = rows.last().map_or(0, |r| r.frame);
-    let mut out = Vec::with_capacity(last as usize);
-    let mut i = 0;
-    for f in 1..=last {
-        let start = i;
-        while i < rows.len() && rows[i].frame == f {
-            i += 1;
+    let mut out: Vec<(u32, std::ops::Range<usize>)> = Vec::new();
+    for (i, r) in rows.iter().enumerate() {
+        match out.last_mut() {
+            Some((f, range)) if *f == r.frame => range.end = i + 1,
+            _ => out.push((r.frame, i..i + 1)),
         }
-        out.push((f, start..i));
     }
     out
 }
