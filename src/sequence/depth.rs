@@ -47,7 +47,7 @@ pub fn read_depth_png(path: &Path) -> Result<DepthMap> {
         .with_guessed_format()
         .map_err(|e| Error::io(path, e))?
         .decode()
-        .map_err(|source| Error::Image { path: path.into(), source })?;
+        .map_err(|error| Error::Image { path: path.into(), error })?;
     match img {
         image::DynamicImage::ImageLuma16(buf) => {
             let (width, height) = buf.dimensions();
@@ -72,6 +72,6 @@ pub fn write_depth_png(path: &Path, depth: &DepthMap) -> Result<()> {
     let mut out = Vec::with_capacity(n);
     PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Paeth)
         .write_image(&bytes, depth.width, depth.height, image::ExtendedColorType::L16)
-        .map_err(|source| Error::Image { path: path.into(), source })?;
+        .map_err(|error| Error::Image { path: path.into(), error })?;
     std::fs::write(path, out).map_err(|e| Error::io(path, e))
 }

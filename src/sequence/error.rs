@@ -6,12 +6,12 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// A file or folder could not be read, written or created.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file or folder.
         path: PathBuf,
-        /// The operating-system error.
-        source: std::io::Error,
+        /// The operating-system error (shown in the message, not chained, so `{:#}` says it once).
+        error: std::io::Error,
     },
     /// A text row that does not parse (CSV, MOT rows, seqinfo.ini).
     #[error("{path}:{line}: {msg}")]
@@ -24,20 +24,20 @@ pub enum Error {
         msg: String,
     },
     /// `meta.json` that is not valid JSON or lacks a required key (serde names line and column).
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Json {
         /// The file.
         path: PathBuf,
         /// The JSON error, with line and column.
-        source: serde_json::Error,
+        error: serde_json::Error,
     },
     /// A PNG or JPEG that cannot be decoded or encoded.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Image {
         /// The file.
         path: PathBuf,
         /// The codec error.
-        source: image::ImageError,
+        error: image::ImageError,
     },
     /// Files that parse but contradict each other or the format (wrong size, missing frame, ...).
     #[error("{path}: {msg}")]
@@ -50,8 +50,8 @@ pub enum Error {
 }
 
 impl Error {
-    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Self::Io { path: path.into(), source }
+    pub(crate) fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
+        Self::Io { path: path.into(), error }
     }
     pub(crate) fn parse(path: impl Into<PathBuf>, line: usize, msg: impl Into<String>) -> Self {
         Self::Parse { path: path.into(), line, msg: msg.into() }

@@ -150,15 +150,14 @@ impl Meta {
     /// Reads and checks `meta.json`.
     pub fn read(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let meta: Meta = serde_json::from_str(&text).map_err(|source| Error::Json { path: path.into(), source })?;
+        let meta: Meta = serde_json::from_str(&text).map_err(|error| Error::Json { path: path.into(), error })?;
         meta.validate(path)?;
         Ok(meta)
     }
 
     /// Writes `meta.json` (pretty-printed, stable key order).
     pub fn write(&self, path: &Path) -> Result<()> {
-        let mut text =
-            serde_json::to_string_pretty(self).map_err(|source| Error::Json { path: path.into(), source })?;
+        let mut text = serde_json::to_string_pretty(self).map_err(|error| Error::Json { path: path.into(), error })?;
         text.push('\n');
         std::fs::write(path, text).map_err(|e| Error::io(path, e))
     }

@@ -132,7 +132,7 @@ impl SequenceWriter {
     /// Encodes and writes a frame as JPEG.
     pub fn write_frame(&self, frame: u32, rgb: &image::RgbImage, quality: u8) -> Result<()> {
         let p = self.frame_path(frame);
-        let bytes = encode_jpeg(rgb, quality).map_err(|source| Error::Image { path: p.clone(), source })?;
+        let bytes = encode_jpeg(rgb, quality).map_err(|error| Error::Image { path: p.clone(), error })?;
         std::fs::write(&p, bytes).map_err(|e| Error::io(&p, e))
     }
 
