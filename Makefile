@@ -8,6 +8,7 @@ DEMO_OUT ?= target/demo
 .PHONY: all setup build test lint fmt clippy demo bench bench-synth clean
 .PHONY: all setup build test lint fmt clippy demo bench bench-core clean
 .PHONY: all setup build test lint fmt clippy demo bench clean demo-run bench-daemon
+.PHONY: all setup build test lint fmt clippy demo bench bench-track clean
 
 all: build
 
@@ -53,6 +54,12 @@ demo-run: build
 # Daemon edges: real-time replay (drops, latency, CPU, RSS) and a long as-fast-as-possible run.
 bench-daemon: setup
 	$(CARGO) bench --locked --bench daemon_replay
+# Tracker speed and quality; mot15 parity/quality need /work/shared/benchmarks/mot15 (and the
+# motmetrics venv for quality: see scripts/check_motmetrics.py).
+bench-track: build
+	$(CARGO) bench --locked --bench track
+	$(CARGO) bench --locked --bench track_quality
+	bash scripts/mot15_parity.sh $(BIN)
 
 clean:
 	$(CARGO) clean
