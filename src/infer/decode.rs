@@ -38,8 +38,8 @@ pub fn decode_yolo(output: &[f32], nc: usize, n: usize, conf: f32, lb: &Letterbo
                 class = c;
             }
         }
-        if !(best >= conf) {
-            continue; // also drops NaN
+        if best.is_nan() || best < conf {
+            continue;
         }
         if !(cx[j].is_finite() && cy[j].is_finite() && w[j] > 0.0 && h[j] > 0.0 && w[j].is_finite() && h[j].is_finite())
         {

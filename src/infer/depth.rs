@@ -226,6 +226,19 @@ fn check_layout(path: &Path, session: &Session, cfg: &DepthConfig) -> Result<(u3
     if !ok {
         return Err(shape_err(&what, "[1, H, W] or [1, 1, H, W] (relative inverse depth)", fmt_shape(&odims)));
     }
+    // Depth maps keep the input's aspect ratio (MiDaS and Depth Anything output the input size);
+    // a map that does not is some other kind of model (e.g. a detector given as the depth model).
+    let (oh, ow) = (odims[odims.len() - 2], odims[odims.len() - 1]);
+    if oh > 0 && ow > 0 {
+        let ratio = (ow as f64 / oh as f64) / (net.0 as f64 / net.1 as f64);
+        if !(0.8..=1.25).contains(&ratio) {
+            return Err(shape_err(
+                &what,
+                &format!("[1, H, W] or [1, 1, H, W] with the input's aspect ratio (input {}x{})", net.0, net.1),
+                fmt_shape(&odims),
+            ));
+        }
+    }
     Ok(net)
 }
 

@@ -7,12 +7,12 @@ use std::path::{Path, PathBuf};
 use ort::session::Session;
 use ort::value::TensorRef;
 
+use super::InferError;
 use super::config::DetectorConfig;
 use super::decode::{Detection, decode_yolo, nms};
 use super::frame::{AxisMap, Normalize, RgbFrame, resample_into};
 use super::letterbox::{Letterbox, PAD_VALUE};
 use super::runtime::{SessionOptions, float_tensor_shape, fmt_shape, open_session};
-use super::InferError;
 use crate::units::Seconds;
 
 /// Detections of one frame, stamped with that frame's time.
@@ -106,14 +106,13 @@ impl Detector {
         let (w, h) = (self.net.0 as usize, self.net.1 as usize);
         let run_err = |e: ort::Error| InferError::Run { path: self.path.clone(), reason: e.to_string() };
         let tensor = TensorRef::from_array_view(([1usize, 3, h, w], &self.input[..])).map_err(run_err)?;
-        let outputs = self.session.run(ort::inputs![tensor]).map_err(|e| InferError::Run {
-            path: self.path.clone(),
-            reason: e.to_string(),
-        })?;
-        let (shape, data) = outputs[0].try_extract_tensor::<f32>().map_err(|e| InferError::Run {
-            path: self.path.clone(),
-            reason: e.to_string(),
-        })?;
+        let outputs = self
+            .session
+            .run(ort::inputs![tensor])
+            .map_err(|e| InferError::Run { path: self.path.clone(), reason: e.to_string() })?;
+        let (shape, data) = outputs[0]
+            .try_extract_tensor::<f32>()
+            .map_err(|e| InferError::Run { path: self.path.clone(), reason: e.to_string() })?;
         let dims: Vec<i64> = shape.iter().copied().collect();
         if dims.len() != 3 || dims[0] != 1 || dims[1] as usize != 4 + self.nc {
             return Err(InferError::Shape {
@@ -161,7 +160,10 @@ fn check_layout(path: &Path, session: &Session, cfg: &DetectorConfig) -> Result<
     };
     let what = format!("output `{}`", output.name());
     let odims = float_tensor_shape(path, &what, output.dtype())?;
-    if odims.len() != 3 || !ok_batch(odims[0]) || odims[1] < 5 {
+    // A YOLO head has far more anchors than rows; `[1, N, 6]` is an end-to-end (NMS-free, e.g.
+    // YOLO26) or transposed export, which this decoder does not read.
+    let transposed = odims.len() == 3 && odims[2] > 0 && odims[2] <= odims[1];
+    if odims.len() != 3 || !ok_batch(odims[0]) || odims[1] < 5 || transposed {
         return Err(shape_err(
             &what,
             "[1, 4 + nc, N] (Ultralytics YOLOv8/YOLO11 detect: cx, cy, w, h, class scores; no NMS)".into(),
@@ -172,7 +174,11 @@ fn check_layout(path: &Path, session: &Session, cfg: &DetectorConfig) -> Result<
     if let Some(want) = cfg.num_classes
         && want != nc
     {
-        return Err(shape_err(&what, format!("[1, {}, N] (detector.num_classes = {want})", want + 4), fmt_shape(&odims)));
+        return Err(shape_err(
+            &what,
+            format!("[1, {}, N] (detector.num_classes = {want})", want + 4),
+            fmt_shape(&odims),
+        ));
     }
     // For static heads the anchor count is fixed by the strides 8/16/32; check it when known.
     if odims[2] > 0 {

@@ -91,11 +91,8 @@ fn init_with(candidates: Vec<(PathBuf, &'static str)>) -> Result<&'static Enviro
     let Some((builder, path)) = loaded else {
         return Err(InferError::Library { tried: tried.trim_end_matches("; ").to_string() });
     };
-    let env = builder
-        .with_name("fme")
-        .with_telemetry(false)
-        .build()
-        .map_err(|e| InferError::Environment(e.to_string()))?;
+    let env =
+        builder.with_name("fme").with_telemetry(false).build().map_err(|e| InferError::Environment(e.to_string()))?;
     tracing::info!(library = %path.display(), "ONNX Runtime loaded");
     Ok(ENV.get_or_init(|| env))
 }
@@ -133,9 +130,7 @@ pub fn open_session(path: &Path, opts: SessionOptions) -> Result<Session, InferE
         builder = builder.with_intra_threads(opts.intra_threads).map_err(|e| model_err(e.to_string()))?;
     }
     builder = builder.with_intra_op_spinning(opts.spin).map_err(|e| model_err(e.to_string()))?;
-    builder
-        .commit_from_memory(&bytes)
-        .map_err(|e| model_err(format!("not a loadable ONNX model: {e}")))
+    builder.commit_from_memory(&bytes).map_err(|e| model_err(format!("not a loadable ONNX model: {e}")))
 }
 
 /// Shape of a float tensor outlet (`-1` for dynamic dimensions), or a [`InferError::Shape`] naming
