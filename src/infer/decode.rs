@@ -20,7 +20,8 @@ pub struct Detection {
 
 /// Decodes a `[4 + nc, n]` row-major head output (batch dimension stripped) into `out` (cleared
 /// first): one candidate per anchor whose best class score is at least `conf`, its box mapped back
-/// through the letterbox `lb`. Non-finite or empty boxes are dropped.
+/// through the letterbox `lb` but not yet clipped (run [`nms`], then [`clip_to_frame`]).
+/// Non-finite or empty boxes are dropped.
 pub fn decode_yolo(output: &[f32], nc: usize, n: usize, conf: f32, lb: &Letterbox, out: &mut Vec<Detection>) {
     out.clear();
     if nc == 0 || output.len() < (4 + nc) * n {
@@ -45,10 +46,7 @@ pub fn decode_yolo(output: &[f32], nc: usize, n: usize, conf: f32, lb: &Letterbo
         {
             continue;
         }
-        let bbox = lb.to_frame(cx[j], cy[j], w[j], h[j]);
-        if bbox.w <= 0.0 || bbox.h <= 0.0 {
-            continue;
-        }
+        let bbox = lb.to_frame_unclipped(cx[j], cy[j], w[j], h[j]);
         out.push(Detection { bbox, score: best, class: class as u16 });
     }
 }
@@ -73,6 +71,15 @@ pub fn nms(dets: &mut Vec<Detection>, iou: f64, agnostic: bool, max_candidates: 
         }
     }
     dets.truncate(kept);
+}
+
+/// Clips every box to the frame of `lb` and drops boxes left empty (entirely in the padding or
+/// outside the frame). Order is kept.
+pub fn clip_to_frame(dets: &mut Vec<Detection>, lb: &Letterbox) {
+    dets.retain_mut(|d| {
+        d.bbox = lb.clip(&d.bbox);
+        d.bbox.w > 0.0 && d.bbox.h > 0.0
+    });
 }
 
 #[cfg(test)]
@@ -117,6 +124,7 @@ mod tests {
         ];
         let mut v = Vec::new();
         decode_yolo(&out, 2, 2, 0.25, &lb, &mut v);
+        clip_to_frame(&mut v, &lb);
         assert_eq!(v.len(), 1);
         assert_eq!(v[0].class, 1);
         assert_eq!(v[0].bbox, PixelBox::new(40.0, 45.0, 20.0, 10.0));

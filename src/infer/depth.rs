@@ -151,6 +151,11 @@ impl DepthNet {
         &self.path
     }
 
+    /// The network input buffer as last filled by `preprocess` (planar `[3, H, W]`).
+    pub fn input_tensor(&self) -> &[f32] {
+        &self.input
+    }
+
     /// Resizes and normalises `frame` into the input buffer (exposed for benchmarks).
     pub fn preprocess(&mut self, frame: &RgbFrame<'_>) {
         let src = (frame.width(), frame.height());

@@ -9,7 +9,7 @@ use ort::value::TensorRef;
 
 use super::InferError;
 use super::config::DetectorConfig;
-use super::decode::{Detection, decode_yolo, nms};
+use super::decode::{Detection, clip_to_frame, decode_yolo, nms};
 use super::frame::{AxisMap, Normalize, RgbFrame, resample_into};
 use super::letterbox::{Letterbox, PAD_VALUE};
 use super::runtime::{SessionOptions, float_tensor_shape, fmt_shape, open_session};
@@ -79,6 +79,11 @@ impl Detector {
         &self.path
     }
 
+    /// The network input buffer as last filled by `preprocess` (planar `[3, H, W]`).
+    pub fn input_tensor(&self) -> &[f32] {
+        &self.input
+    }
+
     /// Letterboxes `frame` into the input buffer (exposed for benchmarks); returns the transform.
     pub fn preprocess(&mut self, frame: &RgbFrame<'_>) -> Letterbox {
         let src = (frame.width(), frame.height());
@@ -103,27 +108,34 @@ impl Detector {
     /// Runs the detector on one frame taken at `t`.
     pub fn detect(&mut self, frame: &RgbFrame<'_>, t: Seconds) -> Result<Detections<'_>, InferError> {
         let lb = self.preprocess(frame);
+        self.run_preprocessed(&lb, t)
+    }
+
+    /// Mutable access to the input buffer, for callers that prepare the tensor themselves (e.g. to
+    /// check decoding against a reference implementation on identical input).
+    pub fn input_tensor_mut(&mut self) -> &mut [f32] {
+        &mut self.input
+    }
+
+    /// Runs the network on the current input buffer and decodes with letterbox `lb`.
+    pub fn run_preprocessed(&mut self, lb: &Letterbox, t: Seconds) -> Result<Detections<'_>, InferError> {
         let (w, h) = (self.net.0 as usize, self.net.1 as usize);
-        let run_err = |e: ort::Error| InferError::Run { path: self.path.clone(), reason: e.to_string() };
+        let path = &self.path;
+        let run_err = |e: ort::Error| InferError::Run { path: path.clone(), reason: e.to_string() };
         let tensor = TensorRef::from_array_view(([1usize, 3, h, w], &self.input[..])).map_err(run_err)?;
-        let outputs = self
-            .session
-            .run(ort::inputs![tensor])
-            .map_err(|e| InferError::Run { path: self.path.clone(), reason: e.to_string() })?;
-        let (shape, data) = outputs[0]
-            .try_extract_tensor::<f32>()
-            .map_err(|e| InferError::Run { path: self.path.clone(), reason: e.to_string() })?;
+        let outputs = self.session.run(ort::inputs![tensor]).map_err(run_err)?;
+        let (shape, data) = outputs[0].try_extract_tensor::<f32>().map_err(run_err)?;
         let dims: Vec<i64> = shape.iter().copied().collect();
         if dims.len() != 3 || dims[0] != 1 || dims[1] as usize != 4 + self.nc {
             return Err(InferError::Shape {
-                path: self.path.clone(),
+                path: path.clone(),
                 what: "output at run time".into(),
                 expected: format!("[1, {}, N]", 4 + self.nc),
                 actual: fmt_shape(&dims),
             });
         }
         let n = dims[2] as usize;
-        decode_yolo(data, self.nc, n, self.cfg.conf_threshold, &lb, &mut self.dets);
+        decode_yolo(data, self.nc, n, self.cfg.conf_threshold, lb, &mut self.dets);
         drop(outputs);
         nms(
             &mut self.dets,
@@ -132,6 +144,7 @@ impl Detector {
             self.cfg.max_candidates,
             self.cfg.max_detections,
         );
+        clip_to_frame(&mut self.dets, lb);
         Ok(Detections { t, items: &self.dets })
     }
 }

@@ -38,13 +38,27 @@ impl Letterbox {
     }
 
     /// Maps a box in network-input pixels (centre x, centre y, width, height, as YOLO outputs) to a
-    /// frame box, clipped to the frame. Same as Ultralytics' `scale_boxes` + `clip_boxes`.
+    /// frame box, clipped to the frame. Same as Ultralytics' `scale_boxes` (which clips).
     pub fn to_frame(&self, cx: f32, cy: f32, w: f32, h: f32) -> PixelBox {
+        self.clip(&self.to_frame_unclipped(cx, cy, w, h))
+    }
+
+    /// As [`Self::to_frame`] without clipping: a uniform scale and shift, so IoUs are unchanged
+    /// (NMS runs on these, as Ultralytics runs NMS before `scale_boxes`).
+    pub fn to_frame_unclipped(&self, cx: f32, cy: f32, w: f32, h: f32) -> PixelBox {
         let (cx, cy, w, h) = (cx as f64, cy as f64, w as f64, h as f64);
-        let x0 = ((cx - w * 0.5 - self.pad.0 as f64) / self.gain).clamp(0.0, self.src.0 as f64);
-        let y0 = ((cy - h * 0.5 - self.pad.1 as f64) / self.gain).clamp(0.0, self.src.1 as f64);
-        let x1 = ((cx + w * 0.5 - self.pad.0 as f64) / self.gain).clamp(0.0, self.src.0 as f64);
-        let y1 = ((cy + h * 0.5 - self.pad.1 as f64) / self.gain).clamp(0.0, self.src.1 as f64);
+        let x0 = (cx - w * 0.5 - self.pad.0 as f64) / self.gain;
+        let y0 = (cy - h * 0.5 - self.pad.1 as f64) / self.gain;
+        PixelBox::new(x0, y0, w / self.gain, h / self.gain)
+    }
+
+    /// Clips a frame box to the frame.
+    pub fn clip(&self, b: &PixelBox) -> PixelBox {
+        let (sw, sh) = (self.src.0 as f64, self.src.1 as f64);
+        let x0 = b.x.clamp(0.0, sw);
+        let y0 = b.y.clamp(0.0, sh);
+        let x1 = b.right().clamp(0.0, sw);
+        let y1 = b.bottom().clamp(0.0, sh);
         PixelBox::new(x0, y0, x1 - x0, y1 - y0)
     }
 

@@ -19,7 +19,7 @@ pub mod runtime;
 mod scheduler;
 
 pub use config::{DepthConfig, DetectorConfig, RuntimeConfig, ScheduleConfig};
-pub use decode::{Detection, decode_yolo, nms};
+pub use decode::{Detection, clip_to_frame, decode_yolo, nms};
 pub use depth::{DepthNet, MAX_SAMPLE_RADIUS, RelDepthMap};
 pub use detector::{Detections, Detector};
 pub use error::InferError;
