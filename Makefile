@@ -5,7 +5,7 @@ CARGO ?= cargo
 BIN := target/release/fme
 DEMO_OUT ?= target/demo
 
-.PHONY: all setup build test lint fmt clippy demo bench clean
+.PHONY: all setup build test lint fmt clippy demo bench bench-infer clean
 
 all: build
 
@@ -32,6 +32,9 @@ demo: build
 
 bench: build
 	bash scripts/bench.sh
+
+bench-infer: setup
+	$(CARGO) bench --locked --bench infer
 
 clean:
 	$(CARGO) clean
