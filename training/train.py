@@ -60,6 +60,8 @@ def main():
         "val_sequences": [os.path.basename(s) for s in va_paths],
         "train_frames": int(len(tr_images)),
         "val_frames": int(len(va_images)),
+        "train_seeds": seeds_of(os.path.join(args.data, "train")),
+        "val_seeds": seeds_of(os.path.join(args.data, "val")),
     }
     calib_idx = np.random.default_rng(1).choice(len(tr_images), size=min(64, len(tr_images)), replace=False)
 
@@ -70,7 +72,8 @@ def main():
         fp32 = os.path.join(args.models, "fish_det_fp32.onnx")
         det.export(model, fp32, data.NET_H, data.NET_W)
         calib = [tr_images[i].astype(np.float32).transpose(2, 0, 1) / 255.0 for i in calib_idx]
-        res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs}
+        res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs,
+               "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             out = os.path.join(args.models, f"fish_det_int8_{tag}.onnx")
             quant.quantize(fp32, out, calib, "images", act)
@@ -117,10 +120,20 @@ def main():
         metrics["depth"] = res
         pick(args.models, "fish_depth", res, log)
 
-    metrics["log"] = metrics.get("log", []) + log_lines
+    metrics["torch"] = torch.__version__
+    metrics["log"] = log_lines
     with open(metrics_path, "w") as f:
         json.dump(metrics, f, indent=1)
     log(f"done in {time.time() - t0:.0f} s; metrics in {metrics_path}")
+    if os.path.abspath(args.models) == os.path.abspath(os.path.join(HERE, "..", "models")):
+        import cards
+
+        cards.main_with(metrics)
+
+
+def seeds_of(root):
+    seeds = sorted(int(json.load(open(os.path.join(s, "meta.json"))).get("seed", -1)) for s in data.list_sequences(root))
+    return f"{seeds[0]}..{seeds[-1]}" if seeds else "none"
 
 
 def pick(models, stem, res, log):

@@ -193,12 +193,13 @@ fn check_layout(path: &Path, session: &Session, cfg: &DetectorConfig) -> Result<
             fmt_shape(&odims),
         ));
     }
-    // For static heads the anchor count is fixed by the strides 8/16/32; check it when known.
+    // Ultralytics heads have one column per cell of strides 8/16/32; fme's own model has one per
+    // stride-4 cell. Both decode the same way, so a different count is only logged.
     if odims[2] > 0 {
         let (w, h) = (net.0 as i64, net.1 as i64);
         let anchors: i64 = [8, 16, 32].iter().map(|s| (w / s) * (h / s)).sum();
         if odims[2] != anchors {
-            tracing::warn!(model = %path.display(), n = odims[2], expected = anchors, "detector anchor count differs from strides 8/16/32");
+            tracing::debug!(model = %path.display(), n = odims[2], yolo = anchors, "detector column count is not strides 8/16/32");
         }
     }
     Ok((net, nc))
