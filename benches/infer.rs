@@ -29,6 +29,11 @@ fn stats(mut v: Vec<f64>) -> (f64, f64) {
 }
 
 fn main() {
+    // `cargo test --all-targets` also runs harness-less benches (without `--bench`): skip there.
+    if !std::env::args().any(|a| a == "--bench") {
+        println!("infer bench: skipped (run `cargo bench --bench infer` or `make bench-infer`)");
+        return;
+    }
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let runs: usize = std::env::var("FME_BENCH_RUNS").ok().and_then(|s| s.parse().ok()).unwrap_or(50);
     let img = frame();
