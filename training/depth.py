@@ -14,7 +14,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from det import Block, conv
+from det import Block, conv, lr_at
 
 MEAN = np.array([0.485, 0.456, 0.406], np.float32)
 STD = np.array([0.229, 0.224, 0.225], np.float32)
@@ -99,9 +99,9 @@ def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budg
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     n = len(images)
     steps = epochs * math.ceil(n / batch)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=steps, pct_start=0.15)
     t0 = time.time()
     step = 0
+    frac = lr_at(opt, lr, 0.0, 0.0, time_budget_s)
     for ep in range(epochs):
         model.train()
         perm = rng.permutation(n)
@@ -124,13 +124,14 @@ def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budg
             opt.zero_grad()
             loss.backward()
             opt.step()
-            if step < steps - 1:
-                sched.step()
             step += 1
+            frac = lr_at(opt, lr, step / steps, time.time() - t0, time_budget_s)
+            if frac >= 1.0:
+                break
             tot += loss.item() * len(idx)
         log(f"depth epoch {ep + 1}/{epochs} loss {tot / n:.4f} ({time.time() - t0:.0f} s)")
-        if time_budget_s and time.time() - t0 > time_budget_s:
-            log(f"depth: time budget {time_budget_s} s reached after epoch {ep + 1}")
+        if frac >= 1.0:
+            log(f"depth: schedule finished (time budget {time_budget_s} s or steps) in epoch {ep + 1}")
             break
     model.eval()
     return model

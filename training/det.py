@@ -127,6 +127,18 @@ def augment(img, boxes, rng):
     return np.clip(img, 0, 255), boxes
 
 
+def lr_at(opt, max_lr, step_frac, elapsed, budget):
+    """Warm-up then cosine decay over the run, where the run's progress is the larger of the step
+    fraction and the elapsed fraction of the time budget, so training always anneals properly and
+    ends on time on a busy CPU. Returns the progress (>= 1 means stop)."""
+    frac = max(step_frac, elapsed / budget if budget else 0.0)
+    f = min(frac, 1.0)
+    scale = f / 0.05 if f < 0.05 else 0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * (f - 0.05) / 0.95))
+    for g in opt.param_groups:
+        g["lr"] = max_lr * max(scale, 0.02)
+    return frac
+
+
 def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=print, time_budget_s=None):
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -134,10 +146,10 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     n = len(images)
     steps = epochs * math.ceil(n / batch)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=steps, pct_start=0.15)
     gh, gw = images.shape[1] // STRIDE, images.shape[2] // STRIDE
     t0 = time.time()
     step = 0
+    frac = lr_at(opt, lr, 0.0, 0.0, time_budget_s)
     for ep in range(epochs):
         model.train()
         perm = rng.permutation(n)
@@ -159,13 +171,14 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
             opt.zero_grad()
             loss.backward()
             opt.step()
-            if step < steps - 1:
-                sched.step()
             step += 1
+            frac = lr_at(opt, lr, step / steps, time.time() - t0, time_budget_s)
+            if frac >= 1.0:
+                break
             tot += loss.item() * len(idx)
         log(f"det epoch {ep + 1}/{epochs} loss {tot / n:.4f} ({time.time() - t0:.0f} s)")
-        if time_budget_s and time.time() - t0 > time_budget_s:
-            log(f"det: time budget {time_budget_s} s reached after epoch {ep + 1}")
+        if frac >= 1.0:
+            log(f"det: schedule finished (time budget {time_budget_s} s or steps) in epoch {ep + 1}")
             break
     model.eval()
     return model

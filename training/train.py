@@ -32,7 +32,8 @@ def main():
     ap.add_argument("--models", default=os.path.join(HERE, "..", "models"))
     ap.add_argument("--det-epochs", type=int, default=12)
     ap.add_argument("--depth-epochs", type=int, default=10)
-    ap.add_argument("--budget-s", type=float, default=1500, help="training time budget per model, seconds")
+    ap.add_argument("--budget-s", type=float, default=1500, help="detector training time budget, seconds")
+    ap.add_argument("--depth-budget-s", type=float, default=None, help="depth training budget (default: --budget-s)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--every", type=int, default=3, help="use every n-th training frame")
     ap.add_argument("--metrics", default=os.path.join(HERE, "metrics.json"))
@@ -96,7 +97,8 @@ def main():
 
     if "depth" not in skip:
         t1 = time.time()
-        model = depth.train(tr_images, tr_depth, args.depth_epochs, log=log, time_budget_s=args.budget_s)
+        model = depth.train(tr_images, tr_depth, args.depth_epochs, log=log,
+                            time_budget_s=args.depth_budget_s or args.budget_s)
         train_s = time.time() - t1
         fp32 = os.path.join(args.models, "fish_depth_fp32.onnx")
         depth.export(model, fp32, data.NET_H, data.NET_W)

@@ -8,7 +8,7 @@
 # 3. writes models/*.onnx and training/metrics.json; model cards are in models/*.md.
 # Environment: VENV (default /tmp/venv-infer, created from requirements.txt when missing),
 # FME_BIN (an fme binary with `synth`; default: cargo build --release), DATA (default
-# /tmp/fme-train-data), DET_EPOCHS, DEPTH_EPOCHS, BUDGET_S (per model), NICE (default 10).
+# /tmp/fme-train-data), DET_EPOCHS, DEPTH_EPOCHS, BUDGET_S and DEPTH_BUDGET_S (seconds of training per model), NICE (default 10).
 set -euo pipefail
 HERE=$(cd "$(dirname "$0")" && pwd)
 ROOT=$(cd "$HERE/.." && pwd)
@@ -17,6 +17,7 @@ DATA=${DATA:-/tmp/fme-train-data}
 DET_EPOCHS=${DET_EPOCHS:-12}
 DEPTH_EPOCHS=${DEPTH_EPOCHS:-10}
 BUDGET_S=${BUDGET_S:-1500}
+DEPTH_BUDGET_S=${DEPTH_BUDGET_S:-$BUDGET_S}
 NICE=${NICE:-10}
 FRAMES=${FRAMES:-24}
 
@@ -50,4 +51,4 @@ echo "train.sh: data in $DATA ($(ls "$DATA/train" | wc -l) training, $(ls "$DATA
 
 cd "$HERE"
 nice -n "$NICE" "$VENV/bin/python" train.py --data "$DATA" --models "$ROOT/models" \
-  --det-epochs "$DET_EPOCHS" --depth-epochs "$DEPTH_EPOCHS" --budget-s "$BUDGET_S" ${TRAIN_ARGS:-}
+  --det-epochs "$DET_EPOCHS" --depth-epochs "$DEPTH_EPOCHS" --budget-s "$BUDGET_S" --depth-budget-s "$DEPTH_BUDGET_S" ${TRAIN_ARGS:-}
