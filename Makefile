@@ -9,6 +9,7 @@ DEMO_OUT ?= target/demo
 .PHONY: all setup build test lint fmt clippy demo bench bench-core clean
 .PHONY: all setup build test lint fmt clippy demo bench clean demo-run bench-daemon
 .PHONY: all setup build test lint fmt clippy demo bench bench-track clean
+.PHONY: all setup build test lint fmt clippy demo bench bench-infer clean
 
 all: build
 
@@ -60,6 +61,8 @@ bench-track: build
 	$(CARGO) bench --locked --bench track
 	$(CARGO) bench --locked --bench track_quality
 	bash scripts/mot15_parity.sh $(BIN)
+bench-infer: setup
+	$(CARGO) bench --locked --bench infer
 
 clean:
 	$(CARGO) clean

@@ -1,1 +1,29 @@
-//! ONNX Runtime inference: YOLO-style detector, MiDaS-style relative depth, reduced-rate scheduling.
+//! ONNX Runtime inference: YOLO-style detector, MiDaS-style relative depth, reduced-rate scheduling
+//! (paper sec. 4.2 detection, sec. 4.3 relative depth).
+//!
+//! - [`runtime`]: one ONNX Runtime environment per process, library lookup, checked sessions.
+//! - [`Detector`]: Ultralytics YOLOv8/YOLO11 export convention, letterbox + decode + NMS in Rust,
+//!   producing [`Detection`]s in frame pixels.
+//! - [`DepthNet`]: MiDaS v2.1 small / Depth Anything V2 convention, producing a [`RelDepthMap`]
+//!   (relative inverse depth, larger = nearer) sampled at the pixels the estimator needs.
+//! - [`InferSchedule`]: which frames get detection and depth, at configured rates on frame time.
+
+pub mod config;
+mod decode;
+mod depth;
+mod detector;
+mod error;
+mod frame;
+mod letterbox;
+pub mod runtime;
+mod scheduler;
+
+pub use config::{DepthConfig, DetectorConfig, RuntimeConfig, ScheduleConfig};
+pub use decode::{Detection, clip_to_frame, decode_yolo, nms};
+pub use depth::{DepthNet, MAX_SAMPLE_RADIUS, RelDepthMap};
+pub use detector::{Detections, Detector};
+pub use error::InferError;
+pub use frame::{Normalize, RgbFrame};
+pub use letterbox::{Letterbox, PAD_VALUE};
+pub use runtime::SessionOptions;
+pub use scheduler::{FramePlan, InferSchedule, RateScheduler};

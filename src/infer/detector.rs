@@ -1,0 +1,233 @@
+//! The fish detector: an Ultralytics-style YOLO ONNX model (input `[1, 3, H, W]` RGB in 0..1,
+//! letterboxed; output `[1, 4 + nc, N]`), with preprocessing, decoding and NMS in Rust.
+//! Buffers are sized at load and reused, so a frame allocates nothing once the frame size is known.
+
+use std::path::{Path, PathBuf};
+
+use ort::session::Session;
+use ort::value::TensorRef;
+
+use super::InferError;
+use super::config::DetectorConfig;
+use super::decode::{Detection, clip_to_frame, decode_yolo, nms};
+use super::frame::{AxisMap, Normalize, RgbFrame, resample_into};
+use super::letterbox::{Letterbox, PAD_VALUE};
+use super::runtime::{SessionOptions, float_tensor_shape, fmt_shape, open_session};
+use crate::units::Seconds;
+
+/// Detections of one frame, stamped with that frame's time.
+#[derive(Debug, Clone, Copy)]
+pub struct Detections<'a> {
+    /// Timestamp of the frame the detector ran on.
+    pub t: Seconds,
+    /// The detections after NMS, highest score first.
+    pub items: &'a [Detection],
+}
+
+/// A loaded detector with its reusable buffers.
+pub struct Detector {
+    session: Session,
+    path: PathBuf,
+    cfg: DetectorConfig,
+    net: (u32, u32),
+    nc: usize,
+    input: Vec<f32>,
+    letterbox: Option<Letterbox>,
+    xs: AxisMap,
+    ys: AxisMap,
+    dets: Vec<Detection>,
+}
+
+impl std::fmt::Debug for Detector {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Detector").field("path", &self.path).field("net", &self.net).field("nc", &self.nc).finish()
+    }
+}
+
+impl Detector {
+    /// Loads `cfg.model` and checks that it follows the YOLO detection convention.
+    pub fn open(cfg: &DetectorConfig, opts: SessionOptions) -> Result<Self, InferError> {
+        cfg.validate()?;
+        let path = cfg.model.clone();
+        let session = open_session(&path, opts)?;
+        let (net, nc) = check_layout(&path, &session, cfg)?;
+        let plane = net.0 as usize * net.1 as usize;
+        Ok(Self {
+            session,
+            path,
+            cfg: cfg.clone(),
+            net,
+            nc,
+            input: vec![PAD_VALUE as f32 / 255.0; 3 * plane],
+            letterbox: None,
+            xs: AxisMap::default(),
+            ys: AxisMap::default(),
+            dets: Vec::with_capacity(cfg.max_candidates.min(1 << 16)),
+        })
+    }
+
+    /// Network input `(width, height)`.
+    pub fn input_size(&self) -> (u32, u32) {
+        self.net
+    }
+    /// Number of classes of the model.
+    pub fn num_classes(&self) -> usize {
+        self.nc
+    }
+    /// The model file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The network input buffer as last filled by `preprocess` (planar `[3, H, W]`).
+    pub fn input_tensor(&self) -> &[f32] {
+        &self.input
+    }
+
+    /// Letterboxes `frame` into the input buffer (exposed for benchmarks); returns the transform.
+    pub fn preprocess(&mut self, frame: &RgbFrame<'_>) -> Letterbox {
+        let src = (frame.width(), frame.height());
+        let lb = match self.letterbox {
+            Some(lb) if lb.src == src => lb,
+            _ => {
+                // New frame size: rebuild the resize tables and repaint the padding once.
+                let lb = Letterbox::new(src, self.net);
+                self.xs.build(src.0, lb.inner.0);
+                self.ys.build(src.1, lb.inner.1);
+                self.input.fill(PAD_VALUE as f32 / 255.0);
+                self.letterbox = Some(lb);
+                lb
+            }
+        };
+        let (w, h) = (self.net.0 as usize, self.net.1 as usize);
+        let (l, t) = (lb.pad.0 as usize, lb.pad.1 as usize);
+        resample_into(frame, &self.xs, &self.ys, l, t, w, h, &Normalize::UNIT, &mut self.input);
+        lb
+    }
+
+    /// Runs the detector on one frame taken at `t`.
+    pub fn detect(&mut self, frame: &RgbFrame<'_>, t: Seconds) -> Result<Detections<'_>, InferError> {
+        let lb = self.preprocess(frame);
+        self.run_preprocessed(&lb, t)
+    }
+
+    /// Mutable access to the input buffer, for callers that prepare the tensor themselves (e.g. to
+    /// check decoding against a reference implementation on identical input).
+    pub fn input_tensor_mut(&mut self) -> &mut [f32] {
+        &mut self.input
+    }
+
+    /// Runs the network on the current input buffer and decodes with letterbox `lb`.
+    pub fn run_preprocessed(&mut self, lb: &Letterbox, t: Seconds) -> Result<Detections<'_>, InferError> {
+        let (w, h) = (self.net.0 as usize, self.net.1 as usize);
+        let path = &self.path;
+        let run_err = |e: ort::Error| InferError::Run { path: path.clone(), reason: e.to_string() };
+        let tensor = TensorRef::from_array_view(([1usize, 3, h, w], &self.input[..])).map_err(run_err)?;
+        let outputs = self.session.run(ort::inputs![tensor]).map_err(run_err)?;
+        let (shape, data) = outputs[0].try_extract_tensor::<f32>().map_err(run_err)?;
+        let dims: Vec<i64> = shape.iter().copied().collect();
+        if dims.len() != 3 || dims[0] != 1 || dims[1] as usize != 4 + self.nc {
+            return Err(InferError::Shape {
+                path: path.clone(),
+                what: "output at run time".into(),
+                expected: format!("[1, {}, N]", 4 + self.nc),
+                actual: fmt_shape(&dims),
+            });
+        }
+        let n = dims[2] as usize;
+        decode_yolo(data, self.nc, n, self.cfg.conf_threshold, lb, &mut self.dets);
+        drop(outputs);
+        nms(
+            &mut self.dets,
+            self.cfg.iou_threshold as f64,
+            self.cfg.class_agnostic,
+            self.cfg.max_candidates,
+            self.cfg.max_detections,
+        );
+        clip_to_frame(&mut self.dets, lb);
+        Ok(Detections { t, items: &self.dets })
+    }
+}
+
+/// Checks the model's I/O against the convention; returns the input `(w, h)` and class count.
+fn check_layout(path: &Path, session: &Session, cfg: &DetectorConfig) -> Result<((u32, u32), usize), InferError> {
+    let shape_err = |what: &str, expected: String, actual: String| InferError::Shape {
+        path: path.to_path_buf(),
+        what: what.to_string(),
+        expected,
+        actual,
+    };
+    if session.inputs().len() != 1 {
+        return Err(shape_err("inputs", "1 input `[1, 3, H, W]`".into(), format!("{} inputs", session.inputs().len())));
+    }
+    let input = &session.inputs()[0];
+    let what = format!("input `{}`", input.name());
+    let dims = float_tensor_shape(path, &what, input.dtype())?;
+    let ok_batch = |d: i64| d == 1 || d < 0;
+    if dims.len() != 4 || !ok_batch(dims[0]) || dims[1] != 3 {
+        return Err(shape_err(&what, "[1, 3, H, W] (RGB, NCHW)".into(), fmt_shape(&dims)));
+    }
+    let net = resolve_size(path, &what, &dims[2..4], cfg.input_size, "detector.input_size")?;
+    let Some(output) = session.outputs().first() else {
+        return Err(shape_err("outputs", "1 output `[1, 4 + nc, N]`".into(), "none".into()));
+    };
+    let what = format!("output `{}`", output.name());
+    let odims = float_tensor_shape(path, &what, output.dtype())?;
+    // A YOLO head has far more anchors than rows; `[1, N, 6]` is an end-to-end (NMS-free, e.g.
+    // YOLO26) or transposed export, which this decoder does not read.
+    let transposed = odims.len() == 3 && odims[2] > 0 && odims[2] <= odims[1];
+    if odims.len() != 3 || !ok_batch(odims[0]) || odims[1] < 5 || transposed {
+        return Err(shape_err(
+            &what,
+            "[1, 4 + nc, N] (Ultralytics YOLOv8/YOLO11 detect: cx, cy, w, h, class scores; no NMS)".into(),
+            fmt_shape(&odims),
+        ));
+    }
+    let nc = odims[1] as usize - 4;
+    if let Some(want) = cfg.num_classes
+        && want != nc
+    {
+        return Err(shape_err(
+            &what,
+            format!("[1, {}, N] (detector.num_classes = {want})", want + 4),
+            fmt_shape(&odims),
+        ));
+    }
+    // Ultralytics heads have one column per cell of strides 8/16/32; fme's own model has one per
+    // stride-4 cell. Both decode the same way, so a different count is only logged.
+    if odims[2] > 0 {
+        let (w, h) = (net.0 as i64, net.1 as i64);
+        let anchors: i64 = [8, 16, 32].iter().map(|s| (w / s) * (h / s)).sum();
+        if odims[2] != anchors {
+            tracing::debug!(model = %path.display(), n = odims[2], yolo = anchors, "detector column count is not strides 8/16/32");
+        }
+    }
+    Ok((net, nc))
+}
+
+/// The network input size from the model's spatial dims (`H, W`), or from the configuration when
+/// they are dynamic; a configured size must agree with static dims.
+pub(crate) fn resolve_size(
+    path: &Path,
+    what: &str,
+    hw: &[i64],
+    configured: Option<[u32; 2]>,
+    key: &'static str,
+) -> Result<(u32, u32), InferError> {
+    let (h, w) = (hw[0], hw[1]);
+    match (h > 0 && w > 0, configured) {
+        (true, None) => Ok((w as u32, h as u32)),
+        (true, Some([cw, ch])) if cw as i64 == w && ch as i64 == h => Ok((cw, ch)),
+        (true, Some([cw, ch])) => Err(InferError::Shape {
+            path: path.to_path_buf(),
+            what: format!("{what} vs {key}"),
+            expected: format!("[1, 3, {ch}, {cw}] ({key} = [{cw}, {ch}])"),
+            actual: format!("[1, 3, {h}, {w}]"),
+        }),
+        (false, Some([cw, ch])) => Ok((cw, ch)),
+        (false, None) => Err(InferError::Config {
+            key,
+            reason: format!("model {} has a dynamic input size ({what}); set [width, height]", path.display()),
+        }),
+    }
+}

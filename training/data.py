@@ -1,0 +1,106 @@
+"""Reads fme sequences (MOTChallenge + fme extras, see src/sequence) into compact numpy caches.
+
+Frames are resized to the network size (NET_W x NET_H; 640x384 sequences halve exactly, so the
+Ultralytics letterbox is a plain resize with no padding). Boxes are scaled the same way. Depth
+PNGs (16-bit, millimetres, 0 = no data) are kept at the depth-network output size.
+"""
+import json
+import os
+
+import cv2
+import numpy as np
+
+NET_W, NET_H = 320, 192  # detector and depth input (letterbox of 640x384 without padding)
+DEPTH_OUT_W, DEPTH_OUT_H = 160, 96  # depth network output (half the input)
+
+
+def list_sequences(root):
+    """Every folder under root that holds a seqinfo.ini (sorted)."""
+    out = []
+    for dirpath, _dirs, files in os.walk(root):
+        if "seqinfo.ini" in files:
+            out.append(dirpath)
+    return sorted(out)
+
+
+def letterbox_params(w, h):
+    gain = min(NET_W / w, NET_H / h)
+    nw, nh = round(w * gain), round(h * gain)
+    padx = round((NET_W - nw) / 2 - 0.1)
+    pady = round((NET_H - nh) / 2 - 0.1)
+    return gain, nw, nh, padx, pady
+
+
+def letterbox(img_rgb):
+    h, w = img_rgb.shape[:2]
+    gain, nw, nh, padx, pady = letterbox_params(w, h)
+    out = np.full((NET_H, NET_W, 3), 114, np.uint8)
+    out[pady:pady + nh, padx:padx + nw] = cv2.resize(img_rgb, (nw, nh), interpolation=cv2.INTER_LINEAR)
+    return out
+
+
+def read_gt(path):
+    """frame -> list of (x, y, w, h, visibility) in source pixels."""
+    boxes = {}
+    if not os.path.exists(path):
+        return boxes
+    with open(path) as f:
+        for line in f:
+            v = line.strip().split(",")
+            if len(v) < 9:
+                continue
+            fr = int(v[0])
+            boxes.setdefault(fr, []).append((float(v[2]), float(v[3]), float(v[4]), float(v[5]), float(v[8])))
+    return boxes
+
+
+def load_sequence(seq, every=1, with_depth=True):
+    """Returns dict with images [N,H,W,3] uint8 (network size), boxes (list of [K,5] arrays in
+    network pixels: x,y,w,h,vis), depth [N,DH,DW] float32 metres (0 = none), meta, frame ids."""
+    meta = json.load(open(os.path.join(seq, "meta.json")))
+    gt = read_gt(os.path.join(seq, "gt", "gt.txt"))
+    frames = sorted(f for f in os.listdir(os.path.join(seq, "img1")) if f[0].isdigit())
+    imgs, boxes, depths, ids = [], [], [], []
+    for i, name in enumerate(frames):
+        if i % every:
+            continue
+        fr = int(os.path.splitext(name)[0])
+        bgr = cv2.imread(os.path.join(seq, "img1", name), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise IOError(f"{seq}/img1/{name}: unreadable image")
+        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        h, w = rgb.shape[:2]
+        gain, _nw, _nh, padx, pady = letterbox_params(w, h)
+        imgs.append(letterbox(rgb))
+        b = np.array(gt.get(fr, []), np.float32).reshape(-1, 5)
+        b[:, 0] = b[:, 0] * gain + padx
+        b[:, 1] = b[:, 1] * gain + pady
+        b[:, 2:4] *= gain
+        boxes.append(b)
+        ids.append(fr)
+        if with_depth:
+            dpath = os.path.join(seq, "depth", os.path.splitext(name)[0] + ".png")
+            d = cv2.imread(dpath, cv2.IMREAD_UNCHANGED)
+            if d is None:
+                raise IOError(f"{dpath}: unreadable depth PNG")
+            d = d.astype(np.float32) / 1000.0
+            # Nearest resize keeps "0 = no data" from bleeding into valid pixels.
+            depths.append(cv2.resize(d, (DEPTH_OUT_W, DEPTH_OUT_H), interpolation=cv2.INTER_NEAREST))
+    out = {
+        "images": np.stack(imgs),
+        "boxes": boxes,
+        "meta": meta,
+        "frames": ids,
+        "src_size": (w, h),
+    }
+    if with_depth:
+        out["depth"] = np.stack(depths)
+    return out
+
+
+def load_many(root, every=1, with_depth=True):
+    seqs = [load_sequence(s, every, with_depth) for s in list_sequences(root)]
+    images = np.concatenate([s["images"] for s in seqs])
+    boxes = [b for s in seqs for b in s["boxes"]]
+    depth = np.concatenate([s["depth"] for s in seqs]) if with_depth else None
+    return images, boxes, depth, seqs

@@ -1,0 +1,143 @@
+"""A small relative-depth network in the MiDaS convention: input [1,3,H,W] RGB normalised with
+ImageNet mean/std, output [1,H/2,W/2] relative inverse depth (larger = nearer, positive).
+
+Trained with MiDaS' scale- and shift-invariant loss (Ranftl et al., TPAMI 2020, eq. 5-7): target
+disparity 1/z and prediction are each normalised by their median and mean absolute deviation over
+valid pixels, then compared with L1 (the 20% largest residuals trimmed), plus a multi-scale
+gradient-matching term on the normalised maps.
+"""
+import math
+import time
+
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+from det import Block, conv, lr_at
+
+MEAN = np.array([0.485, 0.456, 0.406], np.float32)
+STD = np.array([0.229, 0.224, 0.225], np.float32)
+
+
+class FishDepth(nn.Module):
+    def __init__(self, w=(16, 32, 48, 64, 96)):
+        super().__init__()
+        self.e2 = conv(3, w[0], 2)
+        self.e4 = nn.Sequential(conv(w[0], w[1], 2), Block(w[1]))
+        self.e8 = nn.Sequential(conv(w[1], w[2], 2), Block(w[2]))
+        self.e16 = nn.Sequential(conv(w[2], w[3], 2), Block(w[3]))
+        self.e32 = nn.Sequential(conv(w[3], w[4], 2), Block(w[4]), Block(w[4]))
+        self.d16 = conv(w[4] + w[3], w[3])
+        self.d8 = conv(w[3] + w[2], w[2])
+        self.d4 = conv(w[2] + w[1], w[1])
+        self.d2 = conv(w[1] + w[0], w[0])
+        self.out = nn.Conv2d(w[0], 1, 3, 1, 1)
+
+    def forward(self, x):
+        f2 = self.e2(x)
+        f4 = self.e4(f2)
+        f8 = self.e8(f4)
+        f16 = self.e16(f8)
+        f32 = self.e32(f16)
+        up = lambda a: F.interpolate(a, scale_factor=2.0, mode="nearest")  # noqa: E731
+        y = self.d16(torch.cat([up(f32), f16], 1))
+        y = self.d8(torch.cat([up(y), f8], 1))
+        y = self.d4(torch.cat([up(y), f4], 1))
+        y = self.d2(torch.cat([up(y), f2], 1))
+        return F.softplus(self.out(y))[:, 0]  # [B, H/2, W/2], positive
+
+
+def normalise(x, m):
+    """Per image: (x - median) / mean|x - median| over mask m (MiDaS eq. 6)."""
+    out = []
+    for xi, mi in zip(x, m):
+        v = xi[mi]
+        if v.numel() < 10:
+            out.append(torch.zeros_like(xi))
+            continue
+        t = v.median()
+        s = (v - t).abs().mean().clamp(min=1e-6)
+        out.append((xi - t) / s)
+    return torch.stack(out)
+
+
+def ssi_loss(pred, disp, mask, trim=0.2, alpha=0.5):
+    pn = normalise(pred, mask)
+    tn = normalise(disp, mask)
+    res = (pn - tn).abs()
+    loss = 0.0
+    for r, m in zip(res, mask):
+        v = r[m]
+        if v.numel() < 10:
+            continue
+        k = int(v.numel() * (1 - trim))
+        loss = loss + torch.topk(v, k, largest=False).values.mean()
+    loss = loss / len(pred)
+    # Gradient matching on 4 scales (MiDaS eq. 8).
+    g = 0.0
+    d = pn - tn
+    mm = mask.float()
+    for s in range(4):
+        if s:
+            d = d[:, ::2, ::2]
+            mm = mm[:, ::2, ::2]
+        gx = (d[:, :, 1:] - d[:, :, :-1]).abs() * mm[:, :, 1:] * mm[:, :, :-1]
+        gy = (d[:, 1:] - d[:, :-1]).abs() * mm[:, 1:] * mm[:, :-1]
+        g = g + (gx.sum() + gy.sum()) / mm.sum().clamp(min=1.0)
+    return loss + alpha * g
+
+
+def to_input(img_u8):
+    return ((img_u8.astype(np.float32) / 255.0 - MEAN) / STD).transpose(2, 0, 1)
+
+
+def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budget_s=None):
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    model = FishDepth()
+    opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
+    n = len(images)
+    steps = epochs * math.ceil(n / batch)
+    t0 = time.time()
+    step = 0
+    frac = lr_at(opt, lr, 0.0, 0.0, time_budget_s)
+    for ep in range(epochs):
+        model.train()
+        perm = rng.permutation(n)
+        tot = 0.0
+        for i in range(0, n, batch):
+            idx = perm[i:i + batch]
+            xs, ds = [], []
+            for j in idx:
+                im, d = images[j], depth[j]
+                if rng.random() < 0.5:
+                    im, d = im[:, ::-1], d[:, ::-1]
+                im = np.clip(im.astype(np.float32) * rng.uniform(0.85, 1.15) + rng.uniform(-10, 10), 0, 255)
+                xs.append(to_input(im))
+                ds.append(np.ascontiguousarray(d))
+            x = torch.from_numpy(np.stack(xs))
+            z = torch.from_numpy(np.stack(ds))
+            mask = z > 0.05
+            disp = torch.where(mask, 1.0 / z.clamp(min=0.05), torch.zeros_like(z))
+            loss = ssi_loss(model(x), disp, mask)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            step += 1
+            frac = lr_at(opt, lr, step / steps, time.time() - t0, time_budget_s)
+            if frac >= 1.0:
+                break
+            tot += loss.item() * len(idx)
+        log(f"depth epoch {ep + 1}/{epochs} loss {tot / n:.4f} ({time.time() - t0:.0f} s)")
+        if frac >= 1.0:
+            log(f"depth: schedule finished (time budget {time_budget_s} s or steps) in epoch {ep + 1}")
+            break
+    model.eval()
+    return model
+
+
+def export(model, path, h, w):
+    model.eval()
+    torch.onnx.export(model, (torch.zeros(1, 3, h, w),), path, input_names=["image"], output_names=["depth"],
+                      opset_version=17, dynamo=False)

@@ -1,0 +1,192 @@
+"""A small one-class fish detector with the Ultralytics YOLO output layout.
+
+Architecture: a plain 3x3-conv backbone (strides 2-32, ReLU: fuses and quantises well in ONNX
+Runtime) with a top-down FPN to one stride-4 head (CenterNet-style: centre heatmap, sub-cell
+offset, log size). The box decode is inside the graph, so the ONNX output is exactly the YOLO
+export layout `[1, 5, N]`: cx, cy, w, h in input pixels, then the sigmoided fish score, one column
+per stride-4 cell (N = H/4 * W/4; non-peak cells score 0). fme's Rust decoder and NMS read it
+like any YOLO11 export.
+"""
+import math
+import time
+
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+STRIDE = 4
+
+
+def conv(cin, cout, s=1, k=3):
+    return nn.Sequential(nn.Conv2d(cin, cout, k, s, k // 2, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True))
+
+
+class Block(nn.Module):
+    def __init__(self, c):
+        super().__init__()
+        self.a = conv(c, c)
+        self.b = nn.Sequential(nn.Conv2d(c, c, 3, 1, 1, bias=False), nn.BatchNorm2d(c))
+
+    def forward(self, x):
+        return F.relu(x + self.b(self.a(x)))
+
+
+class FishDet(nn.Module):
+    def __init__(self, w=(16, 32, 64, 96, 128), fpn=64, head=32):
+        super().__init__()
+        self.stem = conv(3, w[0], 2)
+        self.s4 = nn.Sequential(conv(w[0], w[1], 2), Block(w[1]))
+        self.s8 = nn.Sequential(conv(w[1], w[2], 2), Block(w[2]), Block(w[2]))
+        self.s16 = nn.Sequential(conv(w[2], w[3], 2), Block(w[3]), Block(w[3]))
+        self.s32 = nn.Sequential(conv(w[3], w[4], 2), Block(w[4]))
+        self.l32 = conv(w[4], fpn, k=1)
+        self.l16 = conv(w[3], fpn, k=1)
+        self.l8 = conv(w[2], fpn, k=1)
+        self.l4 = conv(w[1], head, k=1)
+        self.m16 = conv(fpn, fpn)
+        self.m8 = conv(fpn, fpn)
+        self.r4 = conv(fpn, head, k=1)
+        self.m4 = conv(head, head)
+        self.h = conv(head, head)
+        self.out = nn.Conv2d(head, 5, 1)
+        nn.init.constant_(self.out.bias[0], -4.6)  # score prior 0.01
+        self.export_decode = False
+
+    def raw(self, x):
+        c4 = self.s4(self.stem(x))
+        c8 = self.s8(c4)
+        c16 = self.s16(c8)
+        c32 = self.s32(c16)
+        p16 = self.m16(self.l16(c16) + F.interpolate(self.l32(c32), scale_factor=2.0, mode="nearest"))
+        p8 = self.m8(self.l8(c8) + F.interpolate(p16, scale_factor=2.0, mode="nearest"))
+        p4 = self.m4(self.l4(c4) + F.interpolate(self.r4(p8), scale_factor=2.0, mode="nearest"))
+        return self.out(self.h(p4))  # [B,5,H/4,W/4]: heat, ox, oy, lw, lh
+
+    def forward(self, x):
+        r = self.raw(x)
+        if not self.export_decode:
+            return r
+        b, _, gh, gw = r.shape
+        gy, gx = torch.meshgrid(torch.arange(gh, dtype=x.dtype), torch.arange(gw, dtype=x.dtype), indexing="ij")
+        cx = (gx + 0.5 + r[:, 1]) * STRIDE
+        cy = (gy + 0.5 + r[:, 2]) * STRIDE
+        w = torch.exp(r[:, 3].clamp(-4.0, 6.0)) * STRIDE
+        h = torch.exp(r[:, 4].clamp(-4.0, 6.0)) * STRIDE
+        # CenterNet peak extraction: only local maxima of the heatmap (3x3) keep their score, so
+        # neighbouring cells do not report the same fish; fme's NMS then only has real overlaps.
+        hm = torch.sigmoid(r[:, 0:1])
+        peak = (F.max_pool2d(hm, 3, 1, 1) == hm).to(hm.dtype)
+        s = (hm * peak)[:, 0]
+        return torch.stack([cx, cy, w, h, s], 1).reshape(b, 5, gh * gw)
+
+
+def targets(boxes, gh, gw, min_vis):
+    """CenterNet targets for one image: heat [gh,gw], reg [4,gh,gw], mask [gh,gw]."""
+    heat = np.zeros((gh, gw), np.float32)
+    reg = np.zeros((4, gh, gw), np.float32)
+    mask = np.zeros((gh, gw), np.float32)
+    W, H = gw * STRIDE, gh * STRIDE
+    ys, xs = np.mgrid[0:gh, 0:gw]
+    for x, y, w, h, vis in boxes:
+        x0, y0 = max(x, 0.0), max(y, 0.0)
+        x1, y1 = min(x + w, W), min(y + h, H)
+        if x1 - x0 < 2 or y1 - y0 < 2 or vis < min_vis:
+            continue
+        cx, cy, bw, bh = (x0 + x1) / 2 / STRIDE, (y0 + y1) / 2 / STRIDE, (x1 - x0) / STRIDE, (y1 - y0) / STRIDE
+        ix, iy = min(int(cx), gw - 1), min(int(cy), gh - 1)
+        sx, sy = max(bw / 6, 0.6), max(bh / 6, 0.6)
+        g = np.exp(-((xs - ix) ** 2) / (2 * sx * sx) - ((ys - iy) ** 2) / (2 * sy * sy))
+        np.maximum(heat, g, out=heat)
+        heat[iy, ix] = 1.0
+        reg[:, iy, ix] = (cx - ix - 0.5, cy - iy - 0.5, math.log(bw), math.log(bh))
+        mask[iy, ix] = 1.0
+    return heat, reg, mask
+
+
+def loss_fn(r, heat, reg, mask):
+    p = torch.sigmoid(r[:, 0]).clamp(1e-4, 1 - 1e-4)
+    pos = heat.eq(1.0).float()
+    neg = 1.0 - pos
+    pl = -(torch.log(p) * (1 - p) ** 2 * pos).sum()
+    nl = -(torch.log(1 - p) * p ** 2 * (1 - heat) ** 4 * neg).sum()
+    npos = pos.sum().clamp(min=1.0)
+    rl = (F.l1_loss(r[:, 1:5], reg, reduction="none").sum(1) * mask).sum() / npos
+    return (pl + nl) / npos + rl
+
+
+def augment(img, boxes, rng):
+    # Horizontal flip and mild photometric jitter (the generator already varies water and light).
+    if rng.random() < 0.5:
+        img = img[:, ::-1]
+        b = boxes.copy()
+        b[:, 0] = img.shape[1] - b[:, 0] - b[:, 2]
+        boxes = b
+    img = img.astype(np.float32)
+    img = img * rng.uniform(0.8, 1.2) + rng.uniform(-15, 15)
+    return np.clip(img, 0, 255), boxes
+
+
+def lr_at(opt, max_lr, step_frac, elapsed, budget):
+    """Warm-up then cosine decay over the run, where the run's progress is the larger of the step
+    fraction and the elapsed fraction of the time budget, so training always anneals properly and
+    ends on time on a busy CPU. Returns the progress (>= 1 means stop)."""
+    frac = max(step_frac, elapsed / budget if budget else 0.0)
+    f = min(frac, 1.0)
+    scale = f / 0.05 if f < 0.05 else 0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * (f - 0.05) / 0.95))
+    for g in opt.param_groups:
+        g["lr"] = max_lr * max(scale, 0.02)
+    return frac
+
+
+def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=print, time_budget_s=None):
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    model = FishDet()
+    opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
+    n = len(images)
+    steps = epochs * math.ceil(n / batch)
+    gh, gw = images.shape[1] // STRIDE, images.shape[2] // STRIDE
+    t0 = time.time()
+    step = 0
+    frac = lr_at(opt, lr, 0.0, 0.0, time_budget_s)
+    for ep in range(epochs):
+        model.train()
+        perm = rng.permutation(n)
+        tot = 0.0
+        for i in range(0, n, batch):
+            idx = perm[i:i + batch]
+            xs, hs, rs, ms = [], [], [], []
+            for j in idx:
+                im, b = augment(images[j], boxes[j], rng)
+                xs.append(im.transpose(2, 0, 1) / 255.0)
+                h, r, m = targets(b, gh, gw, min_vis)
+                hs.append(h)
+                rs.append(r)
+                ms.append(m)
+            x = torch.from_numpy(np.stack(xs).astype(np.float32))
+            out = model(x)
+            loss = loss_fn(out, torch.from_numpy(np.stack(hs)), torch.from_numpy(np.stack(rs)),
+                           torch.from_numpy(np.stack(ms)))
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            step += 1
+            frac = lr_at(opt, lr, step / steps, time.time() - t0, time_budget_s)
+            if frac >= 1.0:
+                break
+            tot += loss.item() * len(idx)
+        log(f"det epoch {ep + 1}/{epochs} loss {tot / n:.4f} ({time.time() - t0:.0f} s)")
+        if frac >= 1.0:
+            log(f"det: schedule finished (time budget {time_budget_s} s or steps) in epoch {ep + 1}")
+            break
+    model.eval()
+    return model
+
+
+def export(model, path, h, w):
+    model.eval()
+    model.export_decode = True
+    torch.onnx.export(model, (torch.zeros(1, 3, h, w),), path, input_names=["images"], output_names=["output0"],
+                      opset_version=17, dynamo=False)
+    model.export_decode = False

@@ -1,0 +1,49 @@
+"""Static int8 quantisation (QDQ) with onnxruntime.quantization, calibrated on generator frames.
+
+Two variants are produced and measured, because on x86 ONNX Runtime 1.31 fuses QDQ convolutions
+into int8 kernels only with uint8 activations (U8S8), while int8/int8 (S8S8) runs most convolutions
+in float between Q/DQ pairs (research note onnx-timings.md). The tail of each graph (the
+detector's last convolution and in-graph box decode; the depth head's last convolution and
+softplus) stays in float: it mixes pixel coordinates with probabilities under one scale otherwise.
+"""
+import os
+
+import numpy as np
+import onnx
+from onnxruntime.quantization import (CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType,
+                                      quantize_static)
+from onnxruntime.quantization.shape_inference import quant_pre_process
+
+
+class Reader(CalibrationDataReader):
+    def __init__(self, name, xs):
+        self.it = iter([{name: x[None].astype(np.float32)} for x in xs])
+
+    def get_next(self):
+        return next(self.it, None)
+
+
+def tail_nodes(model_path):
+    """Names of the last Conv and every node downstream of it."""
+    m = onnx.load(model_path)
+    nodes = list(m.graph.node)
+    convs = [n for n in nodes if n.op_type == "Conv"]
+    last = convs[-1]
+    tail = {last.name}
+    tensors = set(last.output)
+    for n in nodes[nodes.index(last) + 1:]:
+        if any(i in tensors for i in n.input):
+            tail.add(n.name)
+            tensors.update(n.output)
+    return sorted(tail)
+
+
+def quantize(fp32, out, calib, input_name, act=QuantType.QUInt8):
+    pre = out + ".pre.onnx"
+    quant_pre_process(fp32, pre, skip_symbolic_shape=True)
+    exclude = tail_nodes(pre)
+    quantize_static(pre, out, Reader(input_name, calib), quant_format=QuantFormat.QDQ, activation_type=act,
+                    weight_type=QuantType.QInt8, per_channel=True, calibrate_method=CalibrationMethod.MinMax,
+                    nodes_to_exclude=exclude)
+    os.remove(pre)
+    return exclude

@@ -1,0 +1,153 @@
+#!/usr/bin/env python3
+"""Trains, exports, quantises and evaluates fme's bundled models (see README.md in this folder).
+
+    python train.py --data DATA_DIR --models ../models [--det-epochs N] [--depth-epochs N]
+
+DATA_DIR/train and DATA_DIR/val hold fme sequences (made by train.sh with `fme synth`).
+Writes models/fish_det_{fp32,int8}.onnx, models/fish_depth_{fp32,int8}.onnx and
+training/metrics.json (quality on the held-out sequences, timings, training time).
+"""
+import argparse
+import json
+import os
+import shutil
+import time
+
+import numpy as np
+import torch
+from onnxruntime.quantization import QuantType
+
+import data
+import depth
+import det
+import evaluate
+import quant
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--data", required=True)
+    ap.add_argument("--models", default=os.path.join(HERE, "..", "models"))
+    ap.add_argument("--det-epochs", type=int, default=12)
+    ap.add_argument("--depth-epochs", type=int, default=10)
+    ap.add_argument("--budget-s", type=float, default=1500, help="detector training time budget, seconds")
+    ap.add_argument("--depth-budget-s", type=float, default=None, help="depth training budget (default: --budget-s)")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--every", type=int, default=3, help="use every n-th training frame")
+    ap.add_argument("--metrics", default=os.path.join(HERE, "metrics.json"))
+    ap.add_argument("--skip", default="", help="comma list of stages to skip: det,depth")
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    skip = set(filter(None, args.skip.split(",")))
+    os.makedirs(args.models, exist_ok=True)
+    metrics_path = args.metrics
+    metrics = json.load(open(metrics_path)) if os.path.exists(metrics_path) else {}
+    log_lines = []
+
+    def log(msg):
+        print(msg, flush=True)
+        log_lines.append(msg)
+
+    t0 = time.time()
+    tr_images, tr_boxes, tr_depth, tr_seqs = data.load_many(os.path.join(args.data, "train"), every=args.every)
+    va_paths = data.list_sequences(os.path.join(args.data, "val"))
+    va_images, va_boxes, _, _ = data.load_many(os.path.join(args.data, "val"), every=5, with_depth=False)
+    log(f"data: {len(tr_images)} training frames from {len(tr_seqs)} sequences, {len(va_images)} held-out frames "
+        f"from {len(va_paths)} sequences ({time.time() - t0:.0f} s)")
+    metrics["data"] = {
+        "train_sequences": [os.path.basename(s) for s in data.list_sequences(os.path.join(args.data, "train"))],
+        "val_sequences": [os.path.basename(s) for s in va_paths],
+        "train_frames": int(len(tr_images)),
+        "val_frames": int(len(va_images)),
+        "train_seeds": seeds_of(os.path.join(args.data, "train")),
+        "val_seeds": seeds_of(os.path.join(args.data, "val")),
+    }
+    calib_idx = np.random.default_rng(1).choice(len(tr_images), size=min(64, len(tr_images)), replace=False)
+
+    if "det" not in skip:
+        t1 = time.time()
+        model = det.train(tr_images, tr_boxes, args.det_epochs, log=log, time_budget_s=args.budget_s)
+        train_s = time.time() - t1
+        fp32 = os.path.join(args.models, "fish_det_fp32.onnx")
+        det.export(model, fp32, data.NET_H, data.NET_W)
+        calib = [tr_images[i].astype(np.float32).transpose(2, 0, 1) / 255.0 for i in calib_idx]
+        res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs,
+               "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
+        for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
+            out = os.path.join(args.models, f"fish_det_int8_{tag}.onnx")
+            quant.quantize(fp32, out, calib, "images", act)
+        for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
+            path = os.path.join(args.models, f"fish_det_{tag}.onnx")
+            sess = evaluate.session(path)
+            sweep = evaluate.sweep_conf(sess, va_images, va_boxes)
+            res[tag] = {
+                "size_mb": round(os.path.getsize(path) / 1e6, 2),
+                "ms_1_thread": evaluate.time_model(path, 1),
+                "ms_2_threads": evaluate.time_model(path, 2),
+                "quality": sweep,
+            }
+            best = max(sweep, key=lambda m: 2 * m["precision"] * m["recall"] / max(m["precision"] + m["recall"], 1e-9))
+            log(f"det {tag}: {res[tag]['size_mb']} MB, 2 threads {res[tag]['ms_2_threads'][0]:.2f} ms, "
+                f"1 thread {res[tag]['ms_1_thread'][0]:.2f} ms, best F1 at conf {best['conf']}: "
+                f"P {best['precision']:.3f} R {best['recall']:.3f}")
+        metrics["detector"] = res
+        pick(args.models, "fish_det", res, log)
+
+    if "depth" not in skip:
+        t1 = time.time()
+        model = depth.train(tr_images, tr_depth, args.depth_epochs, log=log,
+                            time_budget_s=args.depth_budget_s or args.budget_s)
+        train_s = time.time() - t1
+        fp32 = os.path.join(args.models, "fish_depth_fp32.onnx")
+        depth.export(model, fp32, data.NET_H, data.NET_W)
+        calib = [depth.to_input(tr_images[i]) for i in calib_idx]
+        res = {"train_seconds": round(train_s, 1), "epochs": args.depth_epochs}
+        for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
+            quant.quantize(fp32, os.path.join(args.models, f"fish_depth_int8_{tag}.onnx"), calib, "image", act)
+        for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
+            path = os.path.join(args.models, f"fish_depth_{tag}.onnx")
+            sess = evaluate.session(path)
+            q = evaluate.eval_depth(sess, va_paths)
+            res[tag] = {
+                "size_mb": round(os.path.getsize(path) / 1e6, 2),
+                "ms_1_thread": evaluate.time_model(path, 1),
+                "ms_2_threads": evaluate.time_model(path, 2),
+                "quality": q,
+            }
+            log(f"depth {tag}: {res[tag]['size_mb']} MB, 2 threads {res[tag]['ms_2_threads'][0]:.2f} ms, "
+                f"1 thread {res[tag]['ms_1_thread'][0]:.2f} ms, RMSE {q['rmse_m']} m, delta<1.25 {q['delta_1.25']} "
+                f"(n={q['n']})")
+        metrics["depth"] = res
+        pick(args.models, "fish_depth", res, log)
+
+    metrics["torch"] = torch.__version__
+    metrics["log"] = log_lines
+    with open(metrics_path, "w") as f:
+        json.dump(metrics, f, indent=1)
+    log(f"done in {time.time() - t0:.0f} s; metrics in {metrics_path}")
+    if os.path.abspath(args.models) == os.path.abspath(os.path.join(HERE, "..", "models")):
+        import cards
+
+        cards.main_with(metrics)
+
+
+def seeds_of(root):
+    seeds = sorted(int(json.load(open(os.path.join(s, "meta.json"))).get("seed", -1)) for s in data.list_sequences(root))
+    return f"{seeds[0]}..{seeds[-1]}" if seeds else "none"
+
+
+def pick(models, stem, res, log):
+    """Keeps the faster int8 variant (2 threads) as <stem>_int8.onnx; removes the other."""
+    a, b = res["int8_u8s8"], res["int8_s8s8"]
+    tag = "u8s8" if a["ms_2_threads"][0] <= b["ms_2_threads"][0] else "s8s8"
+    shutil.copyfile(os.path.join(models, f"{stem}_int8_{tag}.onnx"), os.path.join(models, f"{stem}_int8.onnx"))
+    for t in ("u8s8", "s8s8"):
+        os.remove(os.path.join(models, f"{stem}_int8_{t}.onnx"))
+    res["int8_kept"] = tag
+    log(f"{stem}: kept int8 {tag}")
+
+
+if __name__ == "__main__":
+    main()
