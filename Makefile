@@ -5,11 +5,7 @@ CARGO ?= cargo
 BIN := target/release/fme
 DEMO_OUT ?= target/demo
 
-.PHONY: all setup build test lint fmt clippy demo bench bench-synth clean
-.PHONY: all setup build test lint fmt clippy demo bench bench-core clean
-.PHONY: all setup build test lint fmt clippy demo bench clean demo-run bench-daemon
-.PHONY: all setup build test lint fmt clippy demo bench bench-track clean
-.PHONY: all setup build test lint fmt clippy demo bench bench-infer clean
+.PHONY: all setup build test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer clean
 
 all: build
 
@@ -37,8 +33,8 @@ demo: build
 	@echo "demo: synthetic swarm sequence written to $(DEMO_OUT)/swarm"
 	$(MAKE) --no-print-directory demo-run
 
-bench: build
-	bash scripts/bench.sh
+# Every benchmark (speed is measured here, never in tests). mot15 parity needs ../shared beside the repo.
+bench: bench-synth bench-core bench-track bench-infer bench-daemon
 
 bench-synth: setup
 	$(CARGO) bench --locked --bench synth
@@ -55,7 +51,7 @@ demo-run: build
 # Daemon edges: real-time replay (drops, latency, CPU, RSS) and a long as-fast-as-possible run.
 bench-daemon: setup
 	$(CARGO) bench --locked --bench daemon_replay
-# Tracker speed and quality; mot15 parity/quality need /work/shared/benchmarks/mot15 (and the
+# Tracker speed and quality; mot15 parity/quality need ../shared/benchmarks/mot15 (and the
 # motmetrics venv for quality: see scripts/check_motmetrics.py).
 bench-track: build
 	$(CARGO) bench --locked --bench track

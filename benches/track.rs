@@ -2,7 +2,7 @@
 //!
 //! 1. Update time per frame with 10, 50 and 200 moving objects (steady state, both presets).
 //! 2. Frames per second over every mot15 `det.txt` (directory from `FME_MOT15`, default
-//!    `/work/shared/benchmarks/mot15`; skipped when absent), parsing excluded, median of 5 runs.
+//!    `../shared/benchmarks/mot15` beside the repository; skipped when absent), parsing excluded, median of 5 runs.
 
 use fme::geometry::PixelBox;
 use fme::mot::io::{self, ReadOptions};
@@ -52,7 +52,8 @@ fn main() {
             println!("  {name:8} {n:4} detections: {:8.2} us/frame", median(runs) * 1e6);
         }
     }
-    let dir = std::env::var("FME_MOT15").unwrap_or_else(|_| "/work/shared/benchmarks/mot15".into());
+    let dir = std::env::var("FME_MOT15")
+        .unwrap_or_else(|_| concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/benchmarks/mot15").into());
     let mut seqs = Vec::new();
     if let Ok(rd) = std::fs::read_dir(&dir) {
         let mut paths: Vec<_> =

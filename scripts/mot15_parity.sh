@@ -4,7 +4,7 @@
 # Usage: scripts/mot15_parity.sh [fme binary] [mot15 dir]
 set -euo pipefail
 FME=${1:-target/release/fme}
-DIR=${2:-/work/shared/benchmarks/mot15}
+DIR=${2:-$(cd "$(dirname "$0")/../.." && pwd)/shared/benchmarks/mot15}
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
 printf '%-16s %s\n' sequence "$("$FME" track --hyp /dev/null --gt /dev/null | head -1)"

@@ -4,7 +4,7 @@
 # Usage: scripts/mot15_quality.sh [fme binary] [mot15 dir] [python with motmetrics] [extra fme args]
 set -euo pipefail
 FME=${1:-target/release/fme}
-DIR=${2:-/work/shared/benchmarks/mot15}
+DIR=${2:-$(cd "$(dirname "$0")/../.." && pwd)/shared/benchmarks/mot15}
 PY=${3:-/tmp/venv-mm/bin/python}
 shift $(( $# < 3 ? $# : 3 ))
 MMDATA=$("$PY" -c 'import motmetrics, os; print(os.path.join(os.path.dirname(motmetrics.__file__), "data"))')
