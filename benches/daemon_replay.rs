@@ -3,10 +3,10 @@
 //! in-process client), then a long as-fast-as-possible run for memory flatness.
 //!
 //! Reports: frames dropped after warm-up, frame-to-register latency p50/p99/max, CPU use, resident
-//! memory. The pipeline is whatever `service::build_pipeline` returns (today the frame-difference
-//! stand-in, so this measures the daemon around the pipeline, not detection/depth).
+//! memory. The recording is the bundled `tests/data/swarm20` (calibrated, 20 fish) and the pipeline is
+//! `fme run`'s: bundled int8 detector at 10 Hz, depth at 5 Hz, tracker, eq. 1-5 (`config/fme.toml` defaults).
 //!
-//! Environment: `FME_BENCH_REALTIME_S` (default 20), `FME_BENCH_FAST_FRAMES` (default 100000).
+//! Environment: `FME_BENCH_REALTIME_S` (default 20), `FME_BENCH_FAST_FRAMES` (default 20000).
 //! Run without `--bench` (as `cargo test --all-targets` does) it only smoke-runs: 3 s and 300 frames.
 
 use fme::capture::{FrameSource, RecordedSource};
@@ -15,29 +15,6 @@ use fme::service::{self, Daemon, RunOptions};
 use std::path::Path;
 use std::time::{Duration, Instant};
 use tokio_modbus::prelude::*;
-
-fn write_sequence(dir: &Path, frames: usize, w: u32, h: u32) {
-    let img = dir.join("img1");
-    std::fs::create_dir_all(&img).expect("mkdir");
-    std::fs::write(
-        dir.join("seqinfo.ini"),
-        format!("[Sequence]\nname=bench\nimDir=img1\nframeRate=30\nseqLength={frames}\nimWidth={w}\nimHeight={h}\nimExt=.jpg\n"),
-    )
-    .expect("seqinfo");
-    for f in 0..frames {
-        let mut im = image::RgbImage::from_fn(w, h, |x, y| image::Rgb([10, (40 + y / 8) as u8, (60 + x / 16) as u8]));
-        for fish in 0..20u32 {
-            let x = (fish * 53 + f as u32 * (1 + fish % 5)) % (w - 40);
-            let y = 10 + (fish * 17 + (f as u32 / 3) * (fish % 3)) % (h - 30);
-            for dy in 0..14 {
-                for dx in 0..40 {
-                    im.put_pixel(x + dx, y + dy, image::Rgb([200, 190, 170]));
-                }
-            }
-        }
-        im.save(img.join(format!("{:06}.jpg", f + 1))).expect("save");
-    }
-}
 
 fn proc_status_kb(key: &str) -> u64 {
     std::fs::read_to_string("/proc/self/status")
@@ -74,16 +51,14 @@ fn env_num(key: &str, default: u64) -> u64 {
 
 #[tokio::main(flavor = "current_thread")]
 async fn main() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let (w, h, frames) = (640, 384, 150);
-    write_sequence(dir.path(), frames, w, h);
-    println!("daemon bench: {frames}-frame {w}x{h} 30 fps JPEG recording, pipeline = service::build_pipeline");
+    let seq = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/swarm20");
+    println!("daemon bench: {} (120 frames, 640x384, 30 fps), pipeline = service::build_pipeline", seq.display());
 
     // Phase 1: real time, looping, PLC polling the registers every 100 ms.
     let bench_mode = std::env::args().any(|a| a == "--bench");
     let secs = env_num("FME_BENCH_REALTIME_S", if bench_mode { 20 } else { 3 });
-    let cfg = config(dir.path());
-    let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
+    let cfg = config(&seq);
+    let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(&seq, true, true).expect("open"));
     let pipe = service::build_pipeline(&cfg).expect("pipeline");
     let daemon = Daemon::start(cfg, String::new(), src, pipe, RunOptions::default()).await.expect("start");
     let shared = daemon.shared().clone();
@@ -126,10 +101,10 @@ async fn main() {
     daemon.shutdown().await;
 
     // Phase 2: as fast as possible, many frames, memory sampled along the way.
-    let n = env_num("FME_BENCH_FAST_FRAMES", if bench_mode { 100_000 } else { 300 });
-    let mut cfg = config(dir.path());
+    let n = env_num("FME_BENCH_FAST_FRAMES", if bench_mode { 20_000 } else { 300 });
+    let mut cfg = config(&seq);
     cfg.source.realtime = false;
-    let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), false, true).expect("open"));
+    let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(&seq, false, true).expect("open"));
     let pipe = service::build_pipeline(&cfg).expect("pipeline");
     let mut daemon =
         Daemon::start(cfg, String::new(), src, pipe, RunOptions { max_frames: Some(n) }).await.expect("start");

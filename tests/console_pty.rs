@@ -5,7 +5,7 @@
 mod support;
 
 use fme::capture::{FrameSource, RecordedSource};
-use fme::service::{self, Daemon, RunOptions};
+use fme::service::{Daemon, RunOptions};
 use serialport::SerialPort;
 use std::time::{Duration, Instant};
 
@@ -53,7 +53,7 @@ async fn console_commands_and_fuzz() {
     cfg.console.enabled = true;
     cfg.console.device = slave.name().expect("pty name");
     let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
-    let pipeline = service::build_pipeline(&cfg).expect("pipeline");
+    let pipeline = support::edge_pipeline(&cfg);
     let daemon = Daemon::start(cfg, "[source]\nrealtime = true\n".into(), source, pipeline, RunOptions::default())
         .await
         .expect("start");

@@ -163,3 +163,31 @@ fn systemd_ready_watchdog_and_stopping() {
     assert!(all.matches("WATCHDOG=1").count() >= 4, "{all}");
     assert!(all.contains("STOPPING=1"), "{all}");
 }
+
+#[test]
+fn missing_model_or_onnx_runtime_is_named_at_start() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    support::write_sequence(&dir.path().join("seq"), 5, 64, 48, 30);
+    let seq = dir.path().join("seq");
+    let cfg = write(
+        dir.path(),
+        "run.toml",
+        "[detector]\nmodel = \"/nonexistent/fish-det.onnx\"\n[output.modbus]\nlisten = \"127.0.0.1:0\"\n",
+    );
+    let out = fme().args(["run", "--config"]).arg(&cfg).arg("--source").arg(&seq).output().expect("run");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("detector.model") && err.contains("/nonexistent/fish-det.onnx"), "{err}");
+    let ok = write(dir.path(), "ok.toml", "[output.modbus]\nlisten = \"127.0.0.1:0\"\n");
+    let out = fme()
+        .args(["run", "--config"])
+        .arg(&ok)
+        .arg("--source")
+        .arg(&seq)
+        .env("ORT_DYLIB_PATH", "/nonexistent/ort/libonnxruntime.so")
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("ONNX Runtime") && err.contains("/nonexistent/ort/libonnxruntime.so"), "{err}");
+}

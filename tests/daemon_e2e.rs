@@ -6,7 +6,7 @@ mod support;
 use fme::capture::{FrameSource, RecordedSource};
 use fme::config::WordOrder;
 use fme::output::registers::{FaultCode, decode_f32, join_u32, status};
-use fme::service::{self, Daemon, RunOptions};
+use fme::service::{Daemon, RunOptions};
 use std::time::Duration;
 use tokio_modbus::prelude::*;
 
@@ -24,7 +24,7 @@ async fn recorded_sequence_to_modbus_client() {
     support::write_sequence(dir.path(), 40, 160, 96, 30);
     let cfg = support::test_config(dir.path());
     let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
-    let pipeline = service::build_pipeline(&cfg).expect("pipeline");
+    let pipeline = support::edge_pipeline(&cfg);
     let daemon = Daemon::start(cfg, String::new(), source, pipeline, RunOptions::default()).await.expect("start");
     let addr = daemon.modbus_addr().expect("tcp server address");
     let mut ctx = tcp::connect_slave(addr, Slave(1)).await.expect("connect");
@@ -82,7 +82,7 @@ async fn finite_recording_as_fast_as_possible_finishes() {
     let mut cfg = support::test_config(dir.path());
     cfg.output.modbus.mode = fme::config::ModbusMode::Off;
     let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), false, false).expect("open"));
-    let pipeline = service::build_pipeline(&cfg).expect("pipeline");
+    let pipeline = support::edge_pipeline(&cfg);
     let mut daemon = Daemon::start(cfg, String::new(), source, pipeline, RunOptions::default()).await.expect("start");
     let normal =
         tokio::time::timeout(Duration::from_secs(20), daemon.finished()).await.expect("finishes at end of recording");
@@ -107,15 +107,9 @@ async fn serial_line_output_over_pty() {
     cfg.output.serial.enabled = true;
     cfg.output.serial.device = serialport::SerialPort::name(&line_end).expect("pty name");
     let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
-    let daemon = Daemon::start(
-        cfg.clone(),
-        String::new(),
-        src,
-        service::build_pipeline(&cfg).expect("p"),
-        RunOptions::default(),
-    )
-    .await
-    .expect("start");
+    let daemon = Daemon::start(cfg.clone(), String::new(), src, support::edge_pipeline(&cfg), RunOptions::default())
+        .await
+        .expect("start");
     let text = tokio::task::spawn_blocking(move || {
         let mut acc = String::new();
         let mut buf = [0u8; 1024];

@@ -34,6 +34,13 @@ pub fn write_sequence(dir: &Path, frames: usize, w: u32, h: u32, fps: u32) {
     }
 }
 
+/// The pipeline of the daemon-edge tests (Modbus, serial, console, watchdog): the frame-difference
+/// test double, so these tests exercise the edges quickly without models. The real pipeline has its
+/// own end-to-end tests (`pipeline_e2e.rs`).
+pub fn edge_pipeline(cfg: &Config) -> Box<dyn fme::service::pipeline::Pipeline> {
+    Box::new(fme::service::pipeline::FrameDiffPipeline::new(cfg.motion.smoothing_s, cfg.motion.body_length_m))
+}
+
 /// A config for tests: the given sequence, Modbus TCP server on an ephemeral local port, fast output.
 pub fn test_config(seq: &Path) -> Config {
     let mut c = Config::default();

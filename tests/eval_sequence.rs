@@ -165,6 +165,24 @@ fn gt_boxes_and_gt_depth_recover_known_speeds() {
 }
 
 #[test]
+fn tracker_boxes_are_scored_for_tracking_and_speed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("seq");
+    write_sequence(&dir);
+    let seq = Sequence::open(&dir).unwrap();
+    let opts = EvalOptions { boxes: fme::eval::BoxesChoice::Tracker, ..Default::default() };
+    let r = evaluate(&seq, &opts).unwrap();
+    let m = r.mot.expect("tracking metrics for --boxes tracker");
+    // Three well separated fish, 5% misses and jitter: the tracker keeps them apart.
+    assert!(m.idf1 > 0.8 && m.mota > 0.7, "{}", summary(&r));
+    assert!(r.detection.is_none());
+    let truth = (0.4 + (0.04f64 + 0.09 + 0.01).sqrt() + (0.01f64 + 0.0625).sqrt()) / 3.0;
+    assert!((r.mean_est_mps - truth).abs() < 0.05, "{}", summary(&r));
+    let gt = evaluate(&seq, &EvalOptions::default()).unwrap();
+    assert!(r.speed_rmse_mps > gt.speed_rmse_mps * 0.5, "noisy detections cannot beat ground truth by much");
+}
+
+#[test]
 fn post_processing_removes_box_fluctuation() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("seq");
@@ -252,9 +270,10 @@ fn bad_input_names_file_and_line_and_exits_non_zero() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("seq");
     write_sequence(&dir);
-    // Options whose implementation comes later.
-    fails_with(&["--boxes", "tracker"], &dir, &["not available yet"]);
-    fails_with(&["--depth", "model"], &dir, &["not available yet"]);
+    // Missing models are named; a bad tracker preset is a usage error.
+    fails_with(&["--boxes", "model", "--det-model", "/nonexistent/det.onnx"], &dir, &["/nonexistent/det.onnx"]);
+    fails_with(&["--depth", "model", "--depth-model", "/nonexistent/depth.onnx"], &dir, &["/nonexistent/depth.onnx"]);
+    fails_with(&["--boxes", "tracker", "--tracker", "bogus"], &dir, &["--tracker"]);
     // A track file with a malformed row and one with NaN.
     let tracks = tmp.path().join("tracks.txt");
     std::fs::write(&tracks, "1,1,10,10,20,8,1,-1,-1,-1\n2,1,oops,10,20,8,1,-1,-1,-1\n").unwrap();

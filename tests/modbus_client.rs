@@ -9,7 +9,7 @@ use fme::config::{ModbusMode, WordOrder};
 use fme::output::bank::RegisterBank;
 use fme::output::modbus::{self, ClientSettings, ClientTarget};
 use fme::output::registers::{self, RegisterInputs, status};
-use fme::service::{self, Daemon, RunOptions};
+use fme::service::{Daemon, RunOptions};
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -102,7 +102,7 @@ async fn daemon_writes_block_to_plc_survives_plc_outages() {
     cfg.output.modbus.reconnect_min_ms = 50;
     cfg.output.modbus.reconnect_max_ms = 200;
     let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
-    let pipeline = service::build_pipeline(&cfg).expect("pipeline");
+    let pipeline = support::edge_pipeline(&cfg);
     let daemon = Daemon::start(cfg, String::new(), source, pipeline, RunOptions::default()).await.expect("start");
     let shared = daemon.shared().clone();
 

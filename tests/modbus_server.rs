@@ -9,7 +9,7 @@ use fme::config::{ModbusMode, WordOrder};
 use fme::output::bank::RegisterBank;
 use fme::output::modbus;
 use fme::output::registers::{self, RegisterInputs, decode_f32, status};
-use fme::service::{self, Daemon, RunOptions};
+use fme::service::{Daemon, RunOptions};
 use std::sync::Arc;
 use std::time::Duration;
 use tokio_modbus::ExceptionCode;
@@ -142,15 +142,9 @@ async fn daemon_rtu_server_role_and_missing_adapter() {
     cfg.output.modbus.serial_device = "/dev/ttyFME-absent".into();
     cfg.output.modbus.reconnect_min_ms = 50;
     let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
-    let d = Daemon::start(
-        cfg.clone(),
-        String::new(),
-        src,
-        service::build_pipeline(&cfg).expect("p"),
-        RunOptions::default(),
-    )
-    .await
-    .expect("start without the adapter");
+    let d = Daemon::start(cfg.clone(), String::new(), src, support::edge_pipeline(&cfg), RunOptions::default())
+        .await
+        .expect("start without the adapter");
     let hb = d.shared().bank.block()[12];
     tokio::time::sleep(Duration::from_millis(400)).await;
     assert_ne!(d.shared().bank.block()[12], hb, "running without the RS-485 adapter");
@@ -163,15 +157,9 @@ async fn daemon_rtu_server_role_and_missing_adapter() {
     cfg.output.modbus.parity = fme::config::Parity::None;
     cfg.output.modbus.unit_id = 4;
     let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
-    let d = Daemon::start(
-        cfg.clone(),
-        String::new(),
-        src,
-        service::build_pipeline(&cfg).expect("p"),
-        RunOptions::default(),
-    )
-    .await
-    .expect("start");
+    let d = Daemon::start(cfg.clone(), String::new(), src, support::edge_pipeline(&cfg), RunOptions::default())
+        .await
+        .expect("start");
     tokio::time::sleep(Duration::from_millis(300)).await;
     let mut ctx = rtu::attach_slave(plc_end, Slave(4));
     let mut beats = Vec::new();

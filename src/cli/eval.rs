@@ -75,6 +75,21 @@ pub struct EvalArgs {
     /// relative-gt: amplitude of the smooth multiplicative distortion of the inverse depth.
     #[arg(long, default_value_t = 0.03)]
     pub rel_distortion: f64,
+    /// `--boxes model`: the detector (YOLO-layout ONNX).
+    #[arg(long, default_value = "models/fish_det_int8.onnx")]
+    pub det_model: PathBuf,
+    /// `--boxes model`: minimum detection confidence, 0..1.
+    #[arg(long, default_value_t = 0.3)]
+    pub det_conf: f32,
+    /// `--depth model`: the relative-depth network (MiDaS-layout ONNX, ImageNet normalisation).
+    #[arg(long, default_value = "models/fish_depth_int8.onnx")]
+    pub depth_model: PathBuf,
+    /// ONNX Runtime intra-op threads.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// `--boxes tracker|model`: tracker preset (`default` or `sort`).
+    #[arg(long, default_value = "default")]
+    pub tracker: String,
 }
 
 fn print_table(r: &EvalReport) {
@@ -109,6 +124,24 @@ fn print_table(r: &EvalReport) {
         );
     }
     println!("corrections       {} boxes (eq. 3), {} depths (eq. 4)", r.boxes_corrected, r.depths_corrected);
+    if let Some(d) = &r.detection {
+        println!(
+            "detection         precision {:.3}  recall {:.3}  (IoU 0.5; {} TP, {} FP, {} FN)",
+            d.precision, d.recall, d.tp, d.fp, d.fn_
+        );
+    }
+    if let Some(m) = &r.mot {
+        println!(
+            "tracking          IDF1 {:.2}%  MOTA {:.2}%  MOTP {:.3}  HOTA {:.2}%  {} ID switches, {} FP, {} misses",
+            100.0 * m.idf1,
+            100.0 * m.mota,
+            m.motp,
+            100.0 * m.hota,
+            m.id_switches,
+            m.false_positives,
+            m.misses
+        );
+    }
 }
 
 /// Runs `fme eval`.
@@ -119,6 +152,11 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if !(args.rel_noise.is_finite() && args.rel_noise >= 0.0 && args.rel_distortion.is_finite()) {
         return Err(super::UsageError("--rel-noise must be >= 0 and --rel-distortion finite".into()).into());
     }
+    if !(0.0..=1.0).contains(&args.det_conf) {
+        return Err(super::UsageError(format!("--det-conf must be within 0..1, got {}", args.det_conf)).into());
+    }
+    let tracker = crate::track::TrackerConfig::preset(&args.tracker)
+        .ok_or_else(|| super::UsageError(format!("--tracker must be default or sort, got {:?}", args.tracker)))?;
     let seq =
         Sequence::open(&args.sequence).with_context(|| format!("opening sequence {}", args.sequence.display()))?;
     let mut opts = EvalOptions {
@@ -132,8 +170,13 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         },
         foul_refs: args.foul_refs,
         depth_sample: args.depth_sample,
+        threads: args.threads,
+        tracker,
         ..Default::default()
     };
+    opts.detector.model = crate::infer::runtime::resolve_model(&args.det_model);
+    opts.detector.conf_threshold = args.det_conf;
+    opts.depth_model.model = crate::infer::runtime::resolve_model(&args.depth_model);
     if args.paper {
         opts.motion.speed_span = Seconds(0.0);
     }

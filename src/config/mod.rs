@@ -116,18 +116,35 @@ impl Config {
         if !["linear", "inverse", "robust"].contains(&self.depth.fit.as_str()) {
             return err("depth.fit", format!("must be linear, inverse or robust, got {:?}", self.depth.fit));
         }
-        if self.tracker.max_tracks == 0 || self.tracker.max_tracks > 1024 {
-            return err("tracker.max_tracks", "must be 1..=1024");
+        if self.depth.std.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+            return err("depth.std", format!("must be positive, got {:?}", self.depth.std));
+        }
+        if self.depth.mean.iter().any(|v| !v.is_finite()) {
+            return err("depth.mean", format!("must be finite, got {:?}", self.depth.mean));
+        }
+        if !["default", "sort"].contains(&self.tracker.preset.as_str()) {
+            return err("tracker.preset", format!("must be default or sort, got {:?}", self.tracker.preset));
+        }
+        if self.tracker.max_tracks == 0 || self.tracker.max_tracks > crate::track::MAX_TRACKS {
+            return err("tracker.max_tracks", format!("must be 1..={}", crate::track::MAX_TRACKS));
         }
         unit_interval("tracker.iou_threshold", self.tracker.iou_threshold)?;
+        if self.tracker.min_hits == 0 {
+            return err("tracker.min_hits", "must be >= 1");
+        }
         positive("tracker.max_age_s", self.tracker.max_age_s)?;
         positive("postprocess.box_window_s", self.postprocess.box_window_s)?;
-        if self.postprocess.box_ewma_frames == 0 {
-            return err("postprocess.box_ewma_frames", "must be >= 1");
-        }
+        positive("postprocess.box_ewma_s", self.postprocess.box_ewma_s)?;
         positive("postprocess.depth_jump_m", self.postprocess.depth_jump_m)?;
         positive("postprocess.depth_window_s", self.postprocess.depth_window_s)?;
-        positive("motion.body_length_m", self.motion.body_length_m)?;
+        let m = &self.motion;
+        if !(m.body_length_m.is_finite() && m.body_length_m >= 0.0) {
+            return err("motion.body_length_m", format!("must be >= 0 m (0 = estimated), got {}", m.body_length_m));
+        }
+        if !(m.speed_span_s.is_finite() && m.speed_span_s >= 0.0) {
+            return err("motion.speed_span_s", format!("must be >= 0 s, got {}", m.speed_span_s));
+        }
+        positive("motion.max_speed_mps", m.max_speed_mps)?;
         positive("motion.smoothing_s", self.motion.smoothing_s)?;
         positive("output.rate_hz", self.output.rate_hz)?;
         if self.output.rate_hz > 100.0 {

@@ -7,7 +7,7 @@
 use serde::Deserialize;
 use std::path::PathBuf;
 
-pub use super::stages::{DepthConfig, DetectorConfig, MotionConfig, PostprocessConfig, TrackerConfig};
+pub use super::stages::{CameraConfig, DepthConfig, DetectorConfig, MotionConfig, PostprocessConfig, TrackerConfig};
 
 /// The whole configuration of `fme run`.
 #[derive(Debug, Clone, Default, Deserialize, PartialEq)]
@@ -15,6 +15,8 @@ pub use super::stages::{DepthConfig, DetectorConfig, MotionConfig, PostprocessCo
 pub struct Config {
     /// `[source]`: camera or recorded sequence.
     pub source: SourceConfig,
+    /// `[camera]`: calibration and reference objects for metric depth (paper eq. 1-2).
+    pub camera: CameraConfig,
     /// `[detector]`: ONNX fish detector.
     pub detector: DetectorConfig,
     /// `[depth]`: ONNX relative-depth network.

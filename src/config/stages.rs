@@ -1,21 +1,28 @@
-//! Sections of the pipeline stages: `[detector]`, `[depth]`, `[tracker]`, `[postprocess]`, `[motion]`.
-//!
-//! **Integration point.** These are the daemon's placeholders, kept small and isolated on purpose:
-//! the stage modules define their own serde sections (`infer::{DetectorConfig, DepthConfig,
-//! ScheduleConfig, RuntimeConfig}`, `track::TrackerConfig`, `motion::MotionConfig`, the
-//! post-processing config). At integration, replace the field types in [`super::Config`] with
-//! theirs, call their `validate` from [`super::Config::validate`] (mapping the key they name to a
-//! line with [`super::find_key_line`]) and update `config/fme.toml`. The daemon itself reads only
-//! `motion.smoothing_s` and `motion.body_length_m` (for the stand-in pipeline).
+//! Sections of the pipeline stages: `[camera]`, `[detector]`, `[depth]`, `[tracker]`, `[postprocess]`,
+//! `[motion]`. These are the operator-facing keys (documented in `config/fme.toml`); the pipeline
+//! builder ([`crate::service::fish_pipeline`]) maps them onto the stage modules' own settings
+//! (`infer`, `track`, `postprocess`, `motion`), so the stage modules stay free of daemon concerns.
 
 use serde::Deserialize;
 use std::path::PathBuf;
+
+/// `[camera]`: where the camera calibration and the reference objects come from (paper eq. 1-2).
+#[derive(Debug, Clone, Deserialize, PartialEq, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraConfig {
+    /// A JSON file with the `camera` block (intrinsics, distortion, world-to-camera pose) and the
+    /// `reference_objects` list, in the format of a sequence's `meta.json` (other keys are ignored).
+    /// Empty: the recorded source's own `meta.json`; a V4L2 camera without one runs uncalibrated
+    /// (status bit 3 clear, no speeds).
+    pub calibration: PathBuf,
+}
 
 /// `[detector]`.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct DetectorConfig {
-    /// ONNX model file (relative paths are relative to the working directory).
+    /// ONNX model file (relative paths: the working directory, then the executable's `../../`,
+    /// i.e. the repository when run as `target/release/fme`).
     pub model: PathBuf,
     /// Detection rate, Hz (decoupled from the camera rate; frames in between are only predicted).
     pub rate_hz: f64,
@@ -29,7 +36,13 @@ pub struct DetectorConfig {
 
 impl Default for DetectorConfig {
     fn default() -> Self {
-        Self { model: PathBuf::from("models/detector.onnx"), rate_hz: 10.0, confidence: 0.35, nms_iou: 0.5, threads: 1 }
+        Self {
+            model: PathBuf::from("models/fish_det_int8.onnx"),
+            rate_hz: 10.0,
+            confidence: 0.3,
+            nms_iou: 0.5,
+            threads: 1,
+        }
     }
 }
 
@@ -37,7 +50,7 @@ impl Default for DetectorConfig {
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct DepthConfig {
-    /// ONNX relative-depth model file.
+    /// ONNX relative-depth model file (MiDaS / Depth Anything convention).
     pub model: PathBuf,
     /// Depth rate, Hz.
     pub rate_hz: f64,
@@ -45,11 +58,23 @@ pub struct DepthConfig {
     pub threads: usize,
     /// Metric fit of relative inverse depth (paper eq. 2): `linear`, `inverse` or `robust`.
     pub fit: String,
+    /// Input normalisation: channel means (R, G, B) after `/255` (ImageNet; `[0, 0, 0]` for the
+    /// official MiDaS v2.1 small ONNX).
+    pub mean: [f32; 3],
+    /// Input normalisation: channel standard deviations (`[1, 1, 1]` for the official MiDaS ONNX).
+    pub std: [f32; 3],
 }
 
 impl Default for DepthConfig {
     fn default() -> Self {
-        Self { model: PathBuf::from("models/depth.onnx"), rate_hz: 5.0, threads: 1, fit: "robust".into() }
+        Self {
+            model: PathBuf::from("models/fish_depth_int8.onnx"),
+            rate_hz: 5.0,
+            threads: 1,
+            fit: "robust".into(),
+            mean: crate::infer::Normalize::IMAGENET.mean,
+            std: crate::infer::Normalize::IMAGENET.std,
+        }
     }
 }
 
@@ -57,19 +82,28 @@ impl Default for DepthConfig {
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct TrackerConfig {
-    /// Maximum simultaneous tracks (fixed capacity, no allocation per frame).
+    /// Base settings: `default` (ByteTrack-style, our best) or `sort` (the reference SORT tracker).
+    pub preset: String,
+    /// Maximum simultaneous tracks (fixed capacity, no allocation per frame), 1..=128.
     pub max_tracks: usize,
-    /// Minimum IoU to match a detection to a track, 0..1.
+    /// Minimum IoU to match a detection to a track (paper Table 1 `T_iou`), 0..1.
     pub iou_threshold: f64,
     /// Detections needed before a track is confirmed.
     pub min_hits: u32,
-    /// A track not matched for this long is deleted, s.
+    /// A lost track is kept this long to be recovered, s.
     pub max_age_s: f64,
 }
 
 impl Default for TrackerConfig {
     fn default() -> Self {
-        Self { max_tracks: 64, iou_threshold: 0.3, min_hits: 3, max_age_s: 1.0 }
+        let d = crate::track::TrackerConfig::default_preset();
+        Self {
+            preset: "default".into(),
+            max_tracks: crate::track::MAX_TRACKS,
+            iou_threshold: d.iou_thresh,
+            min_hits: d.min_hits,
+            max_age_s: d.max_lost_s,
+        }
     }
 }
 
@@ -77,10 +111,15 @@ impl Default for TrackerConfig {
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct PostprocessConfig {
+    /// Box-fluctuation detector and correction (eq. 3). Off by default: it raised the speed error
+    /// on our synthetic swarms (README, "Post-processing").
+    pub box_fluctuation: bool,
     /// Window of the box-fluctuation detector (eq. 3), s.
     pub box_window_s: f64,
-    /// Frames averaged by the EWMA that replaces an abnormal box size (eq. 3).
-    pub box_ewma_frames: usize,
+    /// Window of previous sizes whose EWMA replaces an abnormal box size (eq. 3), s.
+    pub box_ewma_s: f64,
+    /// Depth-jump detector and correction (eq. 4).
+    pub depth_jump: bool,
     /// Depth jump threshold delta (eq. 4), m.
     pub depth_jump_m: f64,
     /// Window of the depth EWMA that replaces a jump (eq. 4), s.
@@ -89,7 +128,15 @@ pub struct PostprocessConfig {
 
 impl Default for PostprocessConfig {
     fn default() -> Self {
-        Self { box_window_s: 1.0, box_ewma_frames: 5, depth_jump_m: 0.6, depth_window_s: 1.0 }
+        let d = crate::postprocess::PostprocessConfig::default();
+        Self {
+            box_fluctuation: d.box_fluctuation,
+            box_window_s: d.fluctuation_window.0,
+            box_ewma_s: d.box_ewma_window.0,
+            depth_jump: d.depth_jump,
+            depth_jump_m: d.depth_jump_threshold.0,
+            depth_window_s: d.depth_ewma_window.0,
+        }
     }
 }
 
@@ -97,16 +144,27 @@ impl Default for PostprocessConfig {
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct MotionConfig {
-    /// Mean fish body length used for body lengths/s, m.
+    /// Mean fish body length used for body lengths/s, m; 0 = estimated per fish from box size and depth.
     pub body_length_m: f64,
     /// Fewer tracked fish than this raises the "too few fish" status bit.
     pub min_fish: u32,
     /// Time constant of the smoothed activity value (EWMA), s.
     pub smoothing_s: f64,
+    /// Each fish's speed is its displacement over this span, s (0 = frame to frame, as the paper).
+    pub speed_span_s: f64,
+    /// Per-fish speeds above this are glitches and left out of the mean, m/s.
+    pub max_speed_mps: f64,
 }
 
 impl Default for MotionConfig {
     fn default() -> Self {
-        Self { body_length_m: 0.35, min_fish: 3, smoothing_s: 60.0 }
+        let d = crate::motion::MotionConfig::default();
+        Self {
+            body_length_m: 0.35,
+            min_fish: 3,
+            smoothing_s: 60.0,
+            speed_span_s: d.speed_span.0,
+            max_speed_mps: d.max_speed.0,
+        }
     }
 }

@@ -22,6 +22,11 @@ pub struct IndexedBoxes {
 }
 
 impl IndexedBoxes {
+    /// Boxes per frame (index = 1-based frame number; index 0 unused).
+    pub fn new(name: String, by_frame: Vec<Vec<(u32, PixelBox)>>) -> Self {
+        Self { name, by_frame }
+    }
+
     /// The ground-truth boxes of `gt/gt.txt` with their ids (the paper's GTBBox).
     pub fn ground_truth(seq: &Sequence) -> Self {
         let mut by_frame = vec![Vec::new(); seq.len() as usize + 1];
@@ -71,9 +76,9 @@ impl BoxProvider for IndexedBoxes {
 pub enum BoxesChoice {
     /// `gt/gt.txt`.
     Gt,
-    /// fme's tracker on the sequence's detections (comes with the tracker issue).
+    /// fme's tracker on the sequence's `det/det.txt`, or on noisy detections made from ground truth.
     Tracker,
-    /// The bundled detector + tracker on the frames (comes with the inference issue).
+    /// The detector (`--det-model`) on the frames, then fme's tracker.
     Model,
     /// A MOTChallenge track file.
     File(PathBuf),
@@ -92,13 +97,13 @@ impl std::str::FromStr for BoxesChoice {
 }
 
 impl BoxesChoice {
-    /// Builds the provider; `tracker` and `model` are not available yet and say so.
+    /// Builds the provider for `gt` and files; `tracker` and `model` are run by the evaluation
+    /// driver (they need its options), so here they are an error.
     pub fn provider(&self, seq: &Sequence) -> Result<Box<dyn BoxProvider>, EvalError> {
         match self {
             Self::Gt => Ok(Box::new(IndexedBoxes::ground_truth(seq))),
             Self::File(p) => Ok(Box::new(IndexedBoxes::from_mot_file(p, seq.len())?)),
-            Self::Tracker => Err(EvalError::NotAvailable("--boxes tracker (fme's tracker is not wired into eval yet)")),
-            Self::Model => Err(EvalError::NotAvailable("--boxes model (the detector is not wired into eval yet)")),
+            Self::Tracker | Self::Model => Err(EvalError::NotAvailable("--boxes tracker|model outside eval::evaluate")),
         }
     }
 }

@@ -1,16 +1,20 @@
 //! The evaluation driver: run the estimator over a sequence and score it against ground truth.
 
+use super::live::{self, DetectionScore};
 use super::metrics::{DepthAccuracy, bias, distance_correlation, quantile, rmse};
 use super::relative::{RelativeGtParams, relative_at, sample_relative};
-use super::{BoxesChoice, EvalError};
+use super::{BoxProvider, BoxesChoice, EvalError};
 use crate::geometry::{Pixel, PixelBox};
+use crate::infer::{self, DepthNet, Detector, RelDepthMap, RgbFrame, SessionOptions};
 use crate::metric::regressors::{Regressor, RegressorKind};
 use crate::metric::{
     DepthModel, ReferencePair, References, RelativeMap, ScaleShift, fit, fit_robust, sample_box_quantile, sample_median,
 };
+use crate::mot::MotMetrics;
 use crate::motion::{ActivityEstimator, MotionConfig, TrackObservation};
 use crate::postprocess::PostprocessConfig;
 use crate::sequence::{DepthMap, Sequence};
+use crate::track::TrackerConfig;
 use crate::units::Metres;
 use std::io::Write;
 use std::path::Path;
@@ -21,7 +25,7 @@ use std::path::Path;
 pub enum DepthChoice {
     /// Ground-truth depth maps from `depth/` (the paper's GTDepth).
     Gt,
-    /// The depth network (comes with the inference issue).
+    /// The depth network (`--depth-model`) on every frame, then the metric fit (eq. 1-2).
     Model,
     /// Ground-truth depth turned into noisy relative inverse depth, then the metric fit (eq. 1-2).
     RelativeGt,
@@ -79,6 +83,16 @@ pub struct EvalOptions {
     pub robust_inlier: (Metres, f64),
     /// How fish depth is sampled.
     pub depth_sample: DepthSample,
+    /// Detector for `--boxes model`.
+    pub detector: infer::DetectorConfig,
+    /// Depth network for `--depth model`.
+    pub depth_model: infer::DepthConfig,
+    /// ONNX Runtime intra-op threads.
+    pub threads: usize,
+    /// Tracker for `--boxes tracker|model`.
+    pub tracker: TrackerConfig,
+    /// Seed of the synthetic detections of `--boxes tracker` (when the sequence has no det/det.txt).
+    pub det_seed: u64,
 }
 
 impl Default for EvalOptions {
@@ -94,6 +108,11 @@ impl Default for EvalOptions {
             window_radius: 2,
             robust_inlier: (Metres(0.1), 0.05),
             depth_sample: DepthSample::Centre,
+            detector: infer::DetectorConfig { class_agnostic: true, ..infer::DetectorConfig::default() },
+            depth_model: infer::DepthConfig::default(),
+            threads: 2,
+            tracker: TrackerConfig::default_preset(),
+            det_seed: 1,
         }
     }
 }
@@ -179,9 +198,87 @@ pub struct EvalReport {
     pub boxes_corrected: u64,
     /// Depth corrections by eq. 4 in the main run.
     pub depths_corrected: u64,
+    /// Tracking quality of `--boxes tracker|model` against gt/gt.txt (IoU 0.5).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mot: Option<MotSummary>,
+    /// Detection quality of `--boxes model` (IoU 0.5; fish under 50% visible are don't-care).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub detection: Option<DetectionScore>,
     /// Per-frame series (written by `--series`, not part of the JSON).
     #[serde(skip)]
     pub series: Vec<SeriesRow>,
+}
+
+/// MOT metrics of the tracked boxes (MOTChallenge conventions, IoU 0.5).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct MotSummary {
+    /// IDF1.
+    pub idf1: f64,
+    /// MOTA.
+    pub mota: f64,
+    /// MOTP (mean IoU distance of matches, as py-motmetrics).
+    pub motp: f64,
+    /// HOTA.
+    pub hota: f64,
+    /// Identity switches.
+    pub id_switches: u64,
+    /// False positives.
+    pub false_positives: u64,
+    /// Misses.
+    pub misses: u64,
+}
+
+impl From<&MotMetrics> for MotSummary {
+    fn from(m: &MotMetrics) -> Self {
+        Self {
+            idf1: m.idf1,
+            mota: m.mota,
+            motp: m.motp,
+            hota: m.hota,
+            id_switches: m.num_switches,
+            false_positives: m.num_false_positives,
+            misses: m.num_misses,
+        }
+    }
+}
+
+/// A box source with its tracking and detection scores where computed here.
+type BoxSource = (Box<dyn BoxProvider>, Option<MotSummary>, Option<DetectionScore>);
+
+/// The box source of a run.
+fn box_source(seq: &Sequence, opts: &EvalOptions) -> Result<BoxSource, EvalError> {
+    match &opts.boxes {
+        BoxesChoice::Tracker => {
+            let det_file = seq.dir.join("det").join("det.txt");
+            let dets = if det_file.is_file() {
+                live::read_detections(&det_file, seq.len())?
+            } else {
+                live::synthetic_detections(seq, opts.det_seed)
+            };
+            let (b, m) = live::track(seq, opts.tracker, &dets, "tracker");
+            Ok((Box::new(b), Some((&m).into()), None))
+        }
+        BoxesChoice::Model => {
+            let model_err = |e: infer::InferError| EvalError::Model(format!("--det-model: {e}"));
+            infer::runtime::environment().map_err(model_err)?;
+            let so = SessionOptions { intra_threads: opts.threads, ..SessionOptions::default() };
+            let mut detector = Detector::open(&opts.detector, so).map_err(model_err)?;
+            let (dets, score) = live::model_detections(seq, &mut detector)?;
+            let (b, m) = live::track(seq, opts.tracker, &dets, "model");
+            Ok((Box::new(b), Some((&m).into()), Some(score)))
+        }
+        other => Ok((other.provider(seq)?, None, None)),
+    }
+}
+
+/// Runs the depth network on frame `frame` of `seq`.
+fn model_depth<'a>(seq: &Sequence, net: &'a mut DepthNet, frame: u32) -> Result<&'a RelDepthMap, EvalError> {
+    let path = seq.frame_path(frame);
+    let img = image::open(&path)
+        .map_err(|e| EvalError::Input { path: path.clone(), msg: format!("cannot read frame: {e}") })?
+        .to_rgb8();
+    net.estimate(&RgbFrame::from(&img), seq.timestamp(frame))
+        .map_err(|e| EvalError::Input { path: path.clone(), msg: e.to_string() })
 }
 
 enum Fitted {
@@ -218,17 +315,23 @@ fn to_metres(depth: &DepthMap, out: &mut Vec<f32>) {
 
 /// Runs the evaluation. Reads frames' depth maps one at a time; memory is O(frames + pixels).
 pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalError> {
-    if opts.depth == DepthChoice::Model {
-        return Err(EvalError::NotAvailable("--depth model (the depth network is not wired into eval yet)"));
-    }
-    let mut provider = opts.boxes.provider(seq)?;
     if !seq.has_depth {
         return Err(EvalError::Input {
             path: seq.dir.join("depth"),
-            msg: "missing: --depth gt and relative-gt need the ground-truth depth maps".into(),
+            msg: "missing: the ground-truth depth maps are needed to score depth and speed".into(),
         });
     }
-    let estimated = opts.depth == DepthChoice::RelativeGt;
+    let mut depth_net = match opts.depth {
+        DepthChoice::Model => {
+            let model_err = |e: infer::InferError| EvalError::Model(format!("--depth-model: {e}"));
+            infer::runtime::environment().map_err(model_err)?;
+            let so = SessionOptions { intra_threads: opts.threads, ..SessionOptions::default() };
+            Some(DepthNet::open(&opts.depth_model, so).map_err(model_err)?)
+        }
+        _ => None,
+    };
+    let (mut provider, mot, detection) = box_source(seq, opts)?;
+    let estimated = opts.depth != DepthChoice::Gt;
     let (w, h) = (seq.meta.width as usize, seq.meta.height as usize);
     // Reference points: projected once (the camera is fixed); hidden ones are left out.
     let ref_px: Vec<(Pixel, Metres)> = seq
@@ -277,10 +380,22 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         }
         to_metres(&dm, &mut gt_map);
         let gt = RelativeMap { data: &gt_map, width: w, height: h };
+        let map: Option<&RelDepthMap> = match depth_net.as_mut() {
+            Some(net) => Some(model_depth(seq, net, frame)?),
+            None => None,
+        };
+        // Relative inverse depth at a pixel: the network's map, or ground truth made relative.
+        // (The network's map is sampled with its own window, `depth.sample_radius` map pixels.)
+        let rel = |px: Pixel| -> Option<f64> {
+            match map {
+                Some(m) => m.sample(px).map(f64::from),
+                None => sample_relative(&opts.relative, &dm, frame, px, radius),
+            }
+        };
         if estimated {
             let mut refs = References::new();
             for (i, (px, d)) in ref_px.iter().enumerate() {
-                if let Some(mut r) = sample_relative(&opts.relative, &dm, frame, *px, radius) {
+                if let Some(mut r) = rel(*px) {
                     if i < opts.foul_refs {
                         r *= 1.5;
                     }
@@ -302,13 +417,16 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         let depth_at = |o: &TrackObservation, px: Pixel| -> Option<Metres> {
             let fitted = |r: f64| last_fit.as_ref()?.depth(r);
             match (estimated, opts.depth_sample) {
-                (true, DepthSample::Centre) => fitted(sample_relative(&opts.relative, &dm, frame, px, radius)?),
+                (true, DepthSample::Centre) => fitted(rel(px)?),
                 (false, DepthSample::Centre) => sample_median(&gt, px, radius, |_| true).map(Metres),
                 (est, DepthSample::Box) => {
                     let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
                     if est {
                         // Larger relative inverse depth is nearer: the 75% quantile of R.
-                        fitted(sample_box_quantile(&b, 0.5, 0.75, |p| relative_at(&opts.relative, &dm, frame, p))?)
+                        fitted(sample_box_quantile(&b, 0.5, 0.75, |p| match map {
+                            Some(m) => m.sample_with_radius(p, 0).map(f64::from),
+                            None => relative_at(&opts.relative, &dm, frame, p),
+                        })?)
                     } else {
                         sample_box_quantile(&b, 0.5, 0.25, |p| gt.at(p)).map(Metres)
                     }
@@ -412,6 +530,8 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         references_rejected: rejected,
         boxes_corrected,
         depths_corrected,
+        mot,
+        detection,
         series,
     })
 }

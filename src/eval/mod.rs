@@ -8,12 +8,15 @@
 
 mod boxes;
 mod driver;
+pub mod live;
 pub mod metrics;
 pub mod plot;
 pub mod relative;
 
 pub use boxes::{BoxProvider, BoxesChoice, IndexedBoxes};
-pub use driver::{DepthChoice, DepthSample, EvalOptions, EvalReport, FitChoice, SeriesRow, evaluate, write_series};
+pub use driver::{
+    DepthChoice, DepthSample, EvalOptions, EvalReport, FitChoice, MotSummary, SeriesRow, evaluate, write_series,
+};
 pub use metrics::{DepthAccuracy, distance_correlation, quantile, rmse};
 pub use relative::RelativeGtParams;
 
@@ -33,6 +36,9 @@ pub enum EvalError {
         /// What is wrong.
         msg: String,
     },
+    /// A model or ONNX Runtime problem (the message names the file).
+    #[error("{0}")]
+    Model(String),
     /// An option whose implementation comes with a later issue.
     #[error("{0} is not available yet")]
     NotAvailable(&'static str),

@@ -151,6 +151,11 @@ impl DepthNet {
         &self.path
     }
 
+    /// The map of the last successful [`Self::estimate`], until the next call; `None` before the first.
+    pub fn last_map(&self) -> Option<&RelDepthMap> {
+        (!self.map.data.is_empty()).then_some(&self.map)
+    }
+
     /// The network input buffer as last filled by `preprocess` (planar `[3, H, W]`).
     pub fn input_tensor(&self) -> &[f32] {
         &self.input

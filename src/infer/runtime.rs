@@ -106,6 +106,24 @@ fn init_with(candidates: Vec<(PathBuf, &'static str)>) -> Result<&'static Enviro
     Ok(ENV.get_or_init(|| env))
 }
 
+/// Finds a model file: as given, else (relative paths) beside the repository or install prefix of
+/// the running executable (`target/release/fme` -> the repository; `bin/fme` -> `share/fme/`).
+pub fn resolve_model(path: &Path) -> PathBuf {
+    if path.is_absolute() || path.exists() {
+        return path.to_path_buf();
+    }
+    let exe_dir = std::env::current_exe().ok().and_then(|p| p.parent().map(Path::to_path_buf));
+    if let Some(dir) = exe_dir {
+        for base in [dir.join("../.."), dir.join("../share/fme")] {
+            let p = base.join(path);
+            if p.exists() {
+                return p;
+            }
+        }
+    }
+    path.to_path_buf()
+}
+
 /// Session options shared by the detector and the depth network.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SessionOptions {

@@ -15,10 +15,12 @@
 //! Nothing here allocates: references are held in a fixed-capacity list of [`MAX_REFERENCES`].
 
 mod fit;
+mod references;
 pub mod regressors;
 mod sample;
 
 pub use fit::{DepthModel, FitError, ReferencePair, References, ScaleShift, fit, fit_robust};
+pub use references::ReferencePoints;
 pub use sample::{RelativeMap, sample_box_quantile, sample_median};
 
 /// Most reference objects a scene may have (the paper uses ten).

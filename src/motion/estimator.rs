@@ -221,6 +221,16 @@ impl ActivityEstimator {
         &self.camera
     }
 
+    /// The motion settings.
+    pub fn motion(&self) -> MotionConfig {
+        self.motion
+    }
+
+    /// The post-processing settings.
+    pub fn postprocess(&self) -> PostprocessConfig {
+        self.post
+    }
+
     /// Tracks currently held (seen within `motion.track_timeout`).
     pub fn tracks(&self) -> impl Iterator<Item = TrackView> + '_ {
         self.tracks.iter().map(|s| TrackView {

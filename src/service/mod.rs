@@ -9,8 +9,10 @@
 //! The pipeline thread pings the systemd watchdog each loop turn (a stuck `Pipeline::process` stops
 //! the pings and systemd restarts the service); a camera outage does not (the loop keeps turning).
 //!
-//! **Integration point:** [`build_pipeline`] returns the pipeline `fme run` uses.
+//! [`build_pipeline`] returns the pipeline `fme run` uses ([`fish_pipeline::FishPipeline`]).
 
+pub mod calibration;
+pub mod fish_pipeline;
 pub mod health;
 pub mod pipeline;
 pub mod publish;
@@ -49,13 +51,36 @@ pub enum ServiceError {
     },
 }
 
-/// **Integration point.** Builds the pipeline for `cfg`. Today this is the [`pipeline::FrameDiffPipeline`]
-/// stand-in; at integration it builds detector + tracker + depth + post-processing + motion (paper
-/// eq. 1-5) from `cfg.detector`, `cfg.depth`, `cfg.tracker`, `cfg.postprocess`, `cfg.motion` and
-/// returns model / ONNX Runtime errors as [`ServiceError::Pipeline`] naming the config key.
+/// Builds the pipeline `fme run` uses: detector + tracker + depth + post-processing + motion (paper
+/// eq. 1-5), see [`fish_pipeline`]. Model and ONNX Runtime problems are [`ServiceError::Pipeline`]
+/// naming the config key and the file.
 pub fn build_pipeline(cfg: &Config) -> Result<Box<dyn Pipeline>, ServiceError> {
-    tracing::warn!("using the frame-difference stand-in pipeline: values are NOT fish speeds (integration pending)");
-    Ok(Box::new(pipeline::FrameDiffPipeline::new(cfg.motion.smoothing_s, cfg.motion.body_length_m)))
+    let calibration = calibration_for(cfg)?;
+    match &calibration {
+        Some(c) => tracing::info!(file = %c.path.display(), references = c.references.len(), "camera calibration"),
+        None => tracing::warn!(
+            "no camera calibration (camera.calibration): fish are tracked but no speed is reported (status bit 3 clear)"
+        ),
+    }
+    let p = fish_pipeline::FishPipeline::new(cfg, calibration).map_err(ServiceError::Pipeline)?;
+    Ok(Box::new(p))
+}
+
+/// The calibration: `camera.calibration` when set, else a recorded source's own `meta.json`.
+fn calibration_for(cfg: &Config) -> Result<Option<calibration::Calibration>, ServiceError> {
+    let configured = &cfg.camera.calibration;
+    if !configured.as_os_str().is_empty() {
+        return calibration::Calibration::load(configured)
+            .map(Some)
+            .map_err(|e| ServiceError::Pipeline(format!("camera.calibration: {e}")));
+    }
+    let meta = cfg.source.path.join("meta.json");
+    if cfg.source.path.starts_with("/dev") || !meta.is_file() {
+        return Ok(None);
+    }
+    calibration::Calibration::load(&meta)
+        .map(Some)
+        .map_err(|e| ServiceError::Pipeline(format!("the recording's calibration: {e}")))
 }
 
 /// Run-time options not in the config file.

@@ -1,29 +1,11 @@
 //! The pipeline boundary: frames in, activity samples out.
 //!
-//! **Integration point.** The daemon (capture, queues, outputs, console, watchdog) only knows this
-//! trait. The real detector + tracker + depth + post-processing + motion stages (paper eq. 1-5) are
-//! plugged in by implementing [`Pipeline`] and building it in [`crate::service::build_pipeline`].
-//! Until then [`FrameDiffPipeline`] stands in: it is *not* the paper's estimator.
+//! The daemon (capture, queues, outputs, console, watchdog) only knows the [`Pipeline`] trait. `fme run`
+//! uses [`super::fish_pipeline::FishPipeline`] (detector + tracker + depth + post-processing + motion,
+//! paper eq. 1-5). [`FrameDiffPipeline`] is a test double for the daemon's edges (Modbus, serial,
+//! console, watchdog tests and benchmarks that must not depend on models): it is *not* a fish-speed
+//! estimate.
 //!
-//! Sketch of the real implementation, from the APIs on the `infer`, `track` and `core` branches
-//! (names as of this writing; all per-frame state owned here, buffers reused):
-//! ```text
-//! struct StagesPipeline { schedule: InferSchedule, detector: Detector, depth: DepthNet,
-//!                         tracker: Tracker, estimator: ActivityEstimator, rgb: Vec<u8>,
-//!                         dets: Vec<track::Detection>, obs: Vec<TrackObservation>, ... }
-//! process(frame):
-//!   plan = schedule.plan(frame.timestamp)
-//!   tracker.predict(t)?                                  // every frame, real timestamps
-//!   if plan.detect || plan.depth { frame.to_rgb_into(&mut rgb)? ; RgbFrame::new(w, h, &rgb)? }
-//!   if plan.detect { dets <- detector.detect(&rgb_frame, t)?.items ; tracker.update(t, &dets)? }
-//!   if plan.depth  { rel = depth.infer(&rgb_frame, t)? ; metric fit on references (eq. 1-2) }
-//!   obs <- tracker.outputs() + metric depth at each box
-//!   s = estimator.update_with(t, &obs, depth_at)         // eq. 3-5
-//!   Ok(Some(ActivitySample { timestamp: s.t, mean: s.mean.unwrap_or(NaN), fish: s.n_fish,
-//!        ci95_half: (hi - lo) / 2, smoothed, mean_body_lengths: s.mean_bls, flags: ... }))
-//! health(): detector_ok / depth_ok from the last scheduled run, achieved Hz, tracks = live tracks
-//! calib(): the current scale/shift fit; describe_tracks(): estimator.tracks()
-//! ```
 //! Errors from a stage are returned as [`PipelineError::Stage`] (the service counts and logs them and
 //! keeps going; a panic inside `process` is caught and counted the same way).
 
@@ -129,7 +111,7 @@ pub enum PipelineError {
     },
 }
 
-/// Stand-in pipeline until the real stages are wired in: the "activity" is the mean absolute
+/// Test double for the daemon's edges: the "activity" is the mean absolute
 /// grey-level change between consecutive frames on a coarse grid, scaled by `scale_mps` per unit of
 /// mean change per second. It exercises every edge of the daemon with values that move with the
 /// scene; it is **not** a fish-speed estimate and always flags `depth_uncalibrated`.

@@ -1,0 +1,66 @@
+//! The camera calibration the daemon needs for metric depth (paper eq. 1-2): intrinsics, the
+//! world-to-camera pose and the reference objects, read from a `meta.json`-format file.
+
+use crate::geometry::{Camera, Pose, WorldPoint};
+use crate::sequence::{CameraMeta, ReferenceObject};
+use std::path::{Path, PathBuf};
+
+/// The calibration file: the `camera` block and `reference_objects` of a sequence's `meta.json`;
+/// other keys (fps, water, ...) are allowed and ignored, so a recording's own file works as is.
+#[derive(Debug, Clone, serde::Deserialize)]
+struct CalibrationFile {
+    camera: CameraMeta,
+    #[serde(default)]
+    reference_objects: Vec<ReferenceObject>,
+}
+
+/// A loaded calibration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Calibration {
+    /// The file it came from.
+    pub path: PathBuf,
+    /// Intrinsics and pose.
+    pub camera: Camera,
+    /// The camera-facing surface of each reference object, world frame (what a depth map sees).
+    pub references: Vec<WorldPoint>,
+}
+
+impl Calibration {
+    /// Reads and checks a calibration file; the error names the file and the problem.
+    pub fn load(path: &Path) -> Result<Self, String> {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let f: CalibrationFile = serde_json::from_str(&text)
+            .map_err(|e| format!("{}: not a calibration (meta.json) file: {e}", path.display()))?;
+        let intrinsics = f.camera.intrinsics();
+        intrinsics.validate().map_err(|e| format!("{}: camera: {e}", path.display()))?;
+        let w2c = &f.camera.world_to_camera;
+        let pose = Pose::from_rows(w2c.rotation, w2c.translation)
+            .map_err(|e| format!("{}: camera.world_to_camera: {e}", path.display()))?;
+        let references = f.reference_objects.iter().map(ReferenceObject::front_face_center).collect::<Vec<_>>();
+        if references.iter().any(|p| !(p.0.x.is_finite() && p.0.y.is_finite() && p.0.z.is_finite())) {
+            return Err(format!("{}: reference_objects: a position is not finite", path.display()));
+        }
+        Ok(Self { path: path.to_path_buf(), camera: Camera { intrinsics, pose }, references })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_a_recordings_meta_json_and_rejects_garbage() {
+        let c = Calibration::load(Path::new("tests/data/swarm20/meta.json")).expect("meta.json");
+        assert!(c.references.len() >= 2);
+        assert!((c.camera.intrinsics.cx - 320.0).abs() < 1e-9);
+        let dir = std::env::temp_dir().join(format!("fme-calib-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let bad = dir.join("bad.json");
+        std::fs::write(&bad, "{\"camera\": 3}").unwrap();
+        let e = Calibration::load(&bad).unwrap_err();
+        assert!(e.contains("bad.json") && e.contains("calibration"), "{e}");
+        let e = Calibration::load(&dir.join("missing.json")).unwrap_err();
+        assert!(e.contains("missing.json"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

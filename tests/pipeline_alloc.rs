@@ -1,0 +1,94 @@
+//! The real pipeline allocates nothing on frames without inference (tracker prediction, eq. 3-5 on
+//! every camera frame), and a bounded number on detector/depth frames (JPEG decode and ONNX Runtime
+//! outputs), not growing over time. Counting global allocator, on this test's thread only.
+
+use fme::capture::{Frame, FrameSource, RecordedSource};
+use fme::config::Config;
+use fme::service::calibration::Calibration;
+use fme::service::fish_pipeline::FishPipeline;
+use fme::service::pipeline::Pipeline;
+use fme::units::Seconds;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+struct Counting;
+static ALLOCS: AtomicU64 = AtomicU64::new(0);
+
+thread_local! {
+    static MEASURING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+fn count() {
+    if MEASURING.with(|m| m.get()) {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+// SAFETY: forwards to the system allocator; only counts.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(p, l, n) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn measured(f: impl FnOnce()) -> u64 {
+    ALLOCS.store(0, Ordering::Relaxed);
+    MEASURING.with(|m| m.set(true));
+    f();
+    MEASURING.with(|m| m.set(false));
+    ALLOCS.load(Ordering::Relaxed)
+}
+
+#[test]
+fn prediction_frames_allocate_nothing_and_inference_frames_a_bounded_amount() {
+    let seq = Path::new("tests/data/swarm20");
+    let mut cfg = Config::default();
+    cfg.source.path = seq.into();
+    let cal = Calibration::load(&seq.join("meta.json")).expect("calibration");
+    let mut p = FishPipeline::new(&cfg, Some(cal)).expect("pipeline");
+    let mut src = RecordedSource::open(seq, false, false).expect("open");
+    let mut frames: Vec<Frame> = Vec::new();
+    while let Ok(f) = src.next_frame(Vec::new()) {
+        frames.push(f);
+    }
+    // Warm-up: two passes (the second with shifted timestamps) fill every buffer and track table.
+    for f in &frames {
+        p.process(f).expect("frame");
+    }
+    let shift = frames.len() as f64 / 30.0;
+    let mut per_kind = [(0u64, 0u64); 2]; // (frames, allocations): [prediction only, with inference]
+    for pass in 1..=2 {
+        for (i, f) in frames.iter().enumerate() {
+            let mut f = f.clone();
+            f.timestamp = Seconds(f.timestamp.0 + shift * f64::from(pass));
+            // 30 fps, detector 10 Hz and depth 5 Hz: every 3rd frame runs inference.
+            let inference = i % 3 == 0;
+            let n = measured(|| {
+                p.process(&f).expect("frame");
+            });
+            let k = &mut per_kind[usize::from(inference)];
+            k.0 += 1;
+            k.1 += n;
+        }
+    }
+    assert!(per_kind[0].0 >= 150 && per_kind[1].0 >= 75, "{per_kind:?}");
+    assert_eq!(per_kind[0].1, 0, "prediction-only frames must not allocate ({} frames)", per_kind[0].0);
+    let per_inference = per_kind[1].1 as f64 / per_kind[1].0 as f64;
+    assert!(per_inference < 200.0, "allocations per inference frame: {per_inference}");
+    println!("allocations per inference frame (JPEG decode + ONNX Runtime): {per_inference:.1}");
+}
