@@ -5,44 +5,10 @@
 mod support;
 
 use fme::capture::{FrameQueue, FrameSource, RecordedSource};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-struct Counting;
-static ALLOCS: AtomicU64 = AtomicU64::new(0);
-
-thread_local! {
-    // Only the measuring thread counts (the test harness runs other tests in parallel threads).
-    static MEASURING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
-fn count() {
-    if MEASURING.with(|m| m.get()) {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-    }
-}
-
-// SAFETY: forwards to the system allocator; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(p, l, n) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
+#[path = "common/counting_alloc.rs"]
+mod counting_alloc;
 
 #[test]
 fn capture_path_is_allocation_free_in_steady_state() {
@@ -64,10 +30,6 @@ fn capture_path_is_allocation_free_in_steady_state() {
         }
     };
     cycle(48); // warm-up: buffers grow to the largest frame, the pool fills
-    let before = ALLOCS.load(Ordering::Relaxed);
-    MEASURING.with(|m| m.set(true));
-    cycle(240);
-    MEASURING.with(|m| m.set(false));
-    let after = ALLOCS.load(Ordering::Relaxed);
-    assert_eq!(after - before, 0, "allocations in 240 steady-state frames");
+    let (allocs, ()) = counting_alloc::allocations_in(|| cycle(240));
+    assert_eq!(allocs, 0, "allocations in 240 steady-state frames");
 }

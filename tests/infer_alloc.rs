@@ -1,32 +1,12 @@
 //! The per-frame Rust side of detection (decode, NMS, clipping) and depth sampling allocate nothing
 //! once their buffers exist. A counting global allocator checks it (own test binary).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use fme::geometry::Pixel;
 use fme::infer::{Letterbox, RelDepthMap, clip_to_frame, decode_yolo, nms};
 use fme::units::Seconds;
 
-struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.realloc(p, l, n) }
-    }
-}
-
-#[global_allocator]
-static A: Counting = Counting;
+#[path = "common/counting_alloc.rs"]
+mod counting_alloc;
 
 #[test]
 fn decode_nms_and_sampling_do_not_allocate_per_frame() {
@@ -46,21 +26,21 @@ fn decode_nms_and_sampling_do_not_allocate_per_frame() {
         RelDepthMap::new(Seconds(0.0), 160, 96, (640, 384), 1, (0..160 * 96).map(|i| i as f32).collect()).unwrap();
     // Warm-up frame, then count.
     decode_yolo(&out, 1, n, 0.25, &lb, &mut dets);
-    let before = ALLOCS.load(Ordering::Relaxed);
     let mut kept = 0;
     let mut acc = 0.0;
-    for _ in 0..10 {
-        decode_yolo(&out, 1, n, 0.25, &lb, &mut dets);
-        nms(&mut dets, 0.7, false, 3000, 300);
-        clip_to_frame(&mut dets, &lb);
-        kept = dets.len();
-        for d in &dets {
-            acc += map.sample(d.bbox.center()).unwrap_or(0.0);
+    let (allocs, ()) = counting_alloc::allocations_in(|| {
+        for _ in 0..10 {
+            decode_yolo(&out, 1, n, 0.25, &lb, &mut dets);
+            nms(&mut dets, 0.7, false, 3000, 300);
+            clip_to_frame(&mut dets, &lb);
+            kept = dets.len();
+            for d in &dets {
+                acc += map.sample(d.bbox.center()).unwrap_or(0.0);
+            }
+            acc += map.sample(Pixel::new(10.0, 10.0)).unwrap_or(0.0);
         }
-        acc += map.sample(Pixel::new(10.0, 10.0)).unwrap_or(0.0);
-    }
-    let after = ALLOCS.load(Ordering::Relaxed);
+    });
     assert!(kept > 100, "{kept}");
     assert!(acc > 0.0);
-    assert_eq!(after - before, 0, "allocations in the per-frame path");
+    assert_eq!(allocs, 0, "allocations in the per-frame path");
 }

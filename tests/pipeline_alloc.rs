@@ -8,51 +8,10 @@ use fme::service::calibration::Calibration;
 use fme::service::fish_pipeline::FishPipeline;
 use fme::service::pipeline::Pipeline;
 use fme::units::Seconds;
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::Path;
-use std::sync::atomic::{AtomicU64, Ordering};
 
-struct Counting;
-static ALLOCS: AtomicU64 = AtomicU64::new(0);
-
-thread_local! {
-    static MEASURING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
-fn count() {
-    if MEASURING.with(|m| m.get()) {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-    }
-}
-
-// SAFETY: forwards to the system allocator; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(p, l, n) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
-fn measured(f: impl FnOnce()) -> u64 {
-    ALLOCS.store(0, Ordering::Relaxed);
-    MEASURING.with(|m| m.set(true));
-    f();
-    MEASURING.with(|m| m.set(false));
-    ALLOCS.load(Ordering::Relaxed)
-}
+#[path = "common/counting_alloc.rs"]
+mod counting_alloc;
 
 #[test]
 fn prediction_frames_allocate_nothing_and_inference_frames_a_bounded_amount() {
@@ -78,9 +37,8 @@ fn prediction_frames_allocate_nothing_and_inference_frames_a_bounded_amount() {
             f.timestamp = Seconds(f.timestamp.0 + shift * f64::from(pass));
             // 30 fps, detector 10 Hz and depth 5 Hz: every 3rd frame runs inference.
             let inference = i % 3 == 0;
-            let n = measured(|| {
-                p.process(&f).expect("frame");
-            });
+            let (n, r) = counting_alloc::allocations_in(|| p.process(&f));
+            r.expect("frame");
             let k = &mut per_kind[usize::from(inference)];
             k.0 += 1;
             k.1 += n;

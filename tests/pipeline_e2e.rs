@@ -1,5 +1,5 @@
-//! The real pipeline of `fme run` (bundled int8 detector + tracker + bundled depth network + metric fit
-//! + eq. 3-5) on the bundled recording `tests/data/swarm20`, checked against its ground truth; and the
+//! The real pipeline of `fme run` (bundled int8 detector, tracker, bundled depth network, metric fit,
+//! eq. 3-5) on the bundled recording `tests/data/swarm20`, checked against its ground truth; and the
 //! ways it must fail or recover: missing model, uncalibrated camera, bad frame, clock going backwards.
 
 use fme::capture::{Frame, FrameSource, PixelFormat, RecordedSource};

@@ -4,28 +4,9 @@
 use fme::geometry::PixelBox;
 use fme::track::{Detection, Tracker, TrackerConfig};
 use fme::units::Seconds;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.realloc(p, l, n) }
-    }
-}
-
-#[global_allocator]
-static A: Counting = Counting;
+#[path = "common/counting_alloc.rs"]
+mod counting_alloc;
 
 /// 60 moving objects, some flickering, plus clutter, so that tracks start, get lost and end.
 fn frame(k: usize, out: &mut [Detection; 80]) -> usize {
@@ -57,15 +38,15 @@ fn no_heap_allocation_per_frame() {
             let n = frame(k, &mut buf);
             tracker.update(Seconds(k as f64 / 30.0), &buf[..n]).expect("time increases");
         }
-        let before = ALLOCS.load(Ordering::SeqCst);
         let mut reported = 0;
-        for k in 20..400 {
-            let n = frame(k, &mut buf);
-            reported += tracker.update(Seconds(k as f64 / 30.0), &buf[..n]).expect("time increases").len();
-        }
-        let after = ALLOCS.load(Ordering::SeqCst);
+        let (allocs, ()) = counting_alloc::allocations_in(|| {
+            for k in 20..400 {
+                let n = frame(k, &mut buf);
+                reported += tracker.update(Seconds(k as f64 / 30.0), &buf[..n]).expect("time increases").len();
+            }
+        });
         assert!(reported > 380 * 40, "tracker must actually track ({reported})");
         assert!(tracker.stats().tracks_started > 60, "tracks must start and end");
-        assert_eq!(after - before, 0, "{:?}: {} allocations in 380 frames", cfg.mode, after - before);
+        assert_eq!(allocs, 0, "{:?}: {allocs} allocations in 380 frames", cfg.mode);
     }
 }

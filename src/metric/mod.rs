@@ -21,7 +21,7 @@ mod sample;
 
 pub use fit::{DepthModel, FitError, ReferencePair, References, ScaleShift, fit, fit_robust};
 pub use references::ReferencePoints;
-pub use sample::{RelativeMap, sample_box_quantile, sample_median};
+pub use sample::{MAX_RADIUS, RelativeMap, sample_box_quantile, sample_median};
 
 /// Most reference objects a scene may have (the paper uses ten).
 pub const MAX_REFERENCES: usize = 32;
