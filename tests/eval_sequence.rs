@@ -176,6 +176,10 @@ fn tracker_boxes_are_scored_for_tracking_and_speed() {
     // Three well separated fish, 5% misses and jitter: the tracker keeps them apart.
     assert!(m.idf1 > 0.8 && m.mota > 0.7, "{}", summary(&r));
     assert!(r.detection.is_none());
+    let j = serde_json::to_value(&r).unwrap();
+    for k in ["idf1", "mota", "motp", "id_switches"] {
+        assert!(j.get(k).is_some_and(|v| v.is_number()), "{k} missing at the top level of {j}");
+    }
     let truth = (0.4 + (0.04f64 + 0.09 + 0.01).sqrt() + (0.01f64 + 0.0625).sqrt()) / 3.0;
     assert!((r.mean_est_mps - truth).abs() < 0.05, "{}", summary(&r));
     let gt = evaluate(&seq, &EvalOptions::default()).unwrap();

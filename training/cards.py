@@ -30,9 +30,9 @@ Files: `fish_det_fp32.onnx` and `fish_det_int8.onnx` (static int8, QDQ, {d.get('
 the faster int8 variant on this machine).
 
 ## Convention (same as an Ultralytics YOLOv8/YOLO11 detection export)
-- Input `images` float32 `[1, 3, 192, 320]`, RGB in 0..1, letterboxed (centred, pad 114/255).
-  640x384 frames scale by 0.5 with no padding.
-- Output `output0` float32 `[1, 5, 3840]`: cx, cy, w, h in input pixels, then the fish score
+- Input `images` float32 `[1, 3, {d.get('input', [320, 192])[1]}, {d.get('input', [320, 192])[0]}]`, RGB in 0..1, letterboxed (centred, pad 114/255).
+  640x384 frames scale by {d.get('input', [320, 192])[0] / 640:g} with no padding.
+- Output `output0` float32 `[1, 5, {d.get('input', [320, 192])[0] * d.get('input', [320, 192])[1] // 16}]`: cx, cy, w, h in input pixels, then the fish score
   (sigmoided; no objectness; no NMS in the graph). One column per stride-4 cell; only local maxima
   of the score map (3x3) have a non-zero score. fme decodes, runs NMS and un-letterboxes in Rust
   (`fme::infer::Detector`).
@@ -88,10 +88,10 @@ def depth_card(m):
 Files: `fish_depth_fp32.onnx` and `fish_depth_int8.onnx` (static int8, QDQ, {d.get('int8_kept', '?')} kept).
 
 ## Convention (MiDaS v2.1 small / Depth Anything V2)
-- Input `image` float32 `[1, 3, 192, 320]`: the frame resized to 320x192 (no aspect keep), RGB,
+- Input `image` float32 `[1, 3, {d.get('input', [320, 192])[1]}, {d.get('input', [320, 192])[0]}]`: the frame resized to {d.get('input', [320, 192])[0]}x{d.get('input', [320, 192])[1]} (no aspect keep), RGB,
   `(x/255 - mean) / std` with ImageNet mean (0.485, 0.456, 0.406) and std (0.229, 0.224, 0.225)
   (fme's `[depth]` defaults).
-- Output `depth` float32 `[1, 96, 160]`: relative inverse depth (larger = nearer, positive), known
+- Output `depth` float32 `[1, {d.get('input', [320, 192])[1] // 2}, {d.get('input', [320, 192])[0] // 2}]`: relative inverse depth (larger = nearer, positive), known
   only up to scale and shift; fme fits them to metres with the reference objects (paper eq. 1-2).
 
 ## Model

@@ -10,8 +10,10 @@ import os
 import cv2
 import numpy as np
 
-NET_W, NET_H = 320, 192  # detector and depth input (letterbox of 640x384 without padding)
-DEPTH_OUT_W, DEPTH_OUT_H = 160, 96  # depth network output (half the input)
+# Network input (letterbox of 640x384 without padding). FME_NET=WxH overrides it for one training run
+# (train.sh trains the detector and the depth network in separate runs, each at its own size).
+NET_W, NET_H = (int(v) for v in os.environ.get("FME_NET", "320x192").split("x"))
+DEPTH_OUT_W, DEPTH_OUT_H = NET_W // 2, NET_H // 2  # depth network output (half the input)
 
 
 def list_sequences(root):

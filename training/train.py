@@ -73,7 +73,7 @@ def main():
         fp32 = os.path.join(args.models, "fish_det_fp32.onnx")
         det.export(model, fp32, data.NET_H, data.NET_W)
         calib = [tr_images[i].astype(np.float32).transpose(2, 0, 1) / 255.0 for i in calib_idx]
-        res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs,
+        res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs, "input": [data.NET_W, data.NET_H],
                "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             out = os.path.join(args.models, f"fish_det_int8_{tag}.onnx")
@@ -103,7 +103,7 @@ def main():
         fp32 = os.path.join(args.models, "fish_depth_fp32.onnx")
         depth.export(model, fp32, data.NET_H, data.NET_W)
         calib = [depth.to_input(tr_images[i]) for i in calib_idx]
-        res = {"train_seconds": round(train_s, 1), "epochs": args.depth_epochs}
+        res = {"train_seconds": round(train_s, 1), "epochs": args.depth_epochs, "input": [data.NET_W, data.NET_H]}
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             quant.quantize(fp32, os.path.join(args.models, f"fish_depth_int8_{tag}.onnx"), calib, "image", act)
         for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
@@ -123,7 +123,9 @@ def main():
         pick(args.models, "fish_depth", res, log)
 
     metrics["torch"] = torch.__version__
-    metrics["log"] = log_lines
+    logs = metrics.get("log") if isinstance(metrics.get("log"), dict) else {}
+    logs["+".join(st for st in ("det", "depth") if st not in skip) or "none"] = log_lines
+    metrics["log"] = logs
     with open(metrics_path, "w") as f:
         json.dump(metrics, f, indent=1)
     log(f"done in {time.time() - t0:.0f} s; metrics in {metrics_path}")

@@ -3,20 +3,24 @@
 #   bash training/train.sh            # or: make -C training all
 # 1. builds `fme` (needs the `fme synth` generator) and renders training and held-out swarm
 #    sequences: many seeds, every water type I..7C, layouts A..F, 20-60 fish;
-# 2. trains the detector and the depth network on the CPU (torch, fixed seeds), exports ONNX,
+# 2. trains the detector (input DET_NET, default 480x288) and the depth network (DEPTH_NET, default
+#    320x192) on the CPU (torch, fixed seeds), exports ONNX,
 #    quantises to int8 (QDQ, calibrated on generator frames), measures fp32 vs int8;
 # 3. writes models/*.onnx and training/metrics.json; model cards are in models/*.md.
 # Environment: VENV (default /tmp/venv-infer, created from requirements.txt when missing),
 # FME_BIN (an fme binary with `synth`; default: cargo build --release), DATA (default
-# /tmp/fme-train-data), DET_EPOCHS, DEPTH_EPOCHS, BUDGET_S and DEPTH_BUDGET_S (seconds of training per model), NICE (default 10).
+# /tmp/fme-train-data), DET_EPOCHS, DEPTH_EPOCHS, BUDGET_S and DEPTH_BUDGET_S (seconds of training per model),
+# DET_NET, DEPTH_NET (WxH), TRAIN_SEQS (default 72), SKIP (det|depth), NICE (default 10).
 set -euo pipefail
 HERE=$(cd "$(dirname "$0")" && pwd)
 ROOT=$(cd "$HERE/.." && pwd)
 VENV=${VENV:-/tmp/venv-infer}
 DATA=${DATA:-/tmp/fme-train-data}
-DET_EPOCHS=${DET_EPOCHS:-12}
-DEPTH_EPOCHS=${DEPTH_EPOCHS:-10}
-BUDGET_S=${BUDGET_S:-1500}
+DET_EPOCHS=${DET_EPOCHS:-60}
+DEPTH_EPOCHS=${DEPTH_EPOCHS:-25}
+DET_NET=${DET_NET:-480x288}
+DEPTH_NET=${DEPTH_NET:-320x192}
+BUDGET_S=${BUDGET_S:-1800}
 DEPTH_BUDGET_S=${DEPTH_BUDGET_S:-$BUDGET_S}
 NICE=${NICE:-10}
 FRAMES=${FRAMES:-24}
@@ -45,10 +49,18 @@ gen() { # split first_seed count
   done
 }
 # Training seeds 1000.., held-out seeds 9000.. (never trained on).
-gen train 1000 ${TRAIN_SEQS:-42}
+gen train 1000 ${TRAIN_SEQS:-72}
 gen val 9000 ${VAL_SEQS:-14}
 echo "train.sh: data in $DATA ($(ls "$DATA/train" | wc -l) training, $(ls "$DATA/val" | wc -l) held-out sequences)"
 
 cd "$HERE"
-nice -n "$NICE" "$VENV/bin/python" train.py --data "$DATA" --models "$ROOT/models" \
-  --det-epochs "$DET_EPOCHS" --depth-epochs "$DEPTH_EPOCHS" --budget-s "$BUDGET_S" --depth-budget-s "$DEPTH_BUDGET_S" ${TRAIN_ARGS:-}
+# Two runs, each model at its own input size: the detector at DET_NET (small fish need the pixels),
+# the depth network at DEPTH_NET. SKIP=det or SKIP=depth re-trains only the other one.
+if [ "${SKIP:-}" != det ]; then
+  FME_NET=$DET_NET nice -n "$NICE" "$VENV/bin/python" train.py --data "$DATA" --models "$ROOT/models" --skip depth \
+    --det-epochs "$DET_EPOCHS" --budget-s "$BUDGET_S" ${TRAIN_ARGS:-}
+fi
+if [ "${SKIP:-}" != depth ]; then
+  FME_NET=$DEPTH_NET nice -n "$NICE" "$VENV/bin/python" train.py --data "$DATA" --models "$ROOT/models" --skip det \
+    --depth-epochs "$DEPTH_EPOCHS" --depth-budget-s "$DEPTH_BUDGET_S" ${TRAIN_ARGS:-}
+fi

@@ -48,9 +48,9 @@ pub struct EvalArgs {
     #[arg(long, conflicts_with = "no_box_fluctuation")]
     pub box_fluctuation: bool,
     /// How a fish's depth is read: `centre` (5x5 median at the box centre, the paper) or `box`
-    /// (25% quantile over the central half of the box).
-    #[arg(long, value_enum, default_value_t = DepthSample::Centre)]
-    pub depth_sample: DepthSample,
+    /// (25% quantile over the central half of the box). Default: `box` with `--depth model`, else `centre`.
+    #[arg(long, value_enum)]
+    pub depth_sample: Option<DepthSample>,
     /// Speed from the chord over the span (the paper, with span 0) or a least-squares regression.
     #[arg(long, value_enum, default_value_t = SpeedMethod::Chord)]
     pub speed_method: SpeedMethod,
@@ -90,6 +90,13 @@ pub struct EvalArgs {
     /// `--boxes tracker|model`: tracker preset (`default` or `sort`).
     #[arg(long, default_value = "default")]
     pub tracker: String,
+    /// Time constant (s) of the per-track depth smoothing after eq. 4 (0 = off; default: 2 s with
+    /// `--depth model`, off otherwise).
+    #[arg(long)]
+    pub depth_smoothing: Option<f64>,
+    /// `--boxes tracker|model`: tracker keys over the preset (TOML, as `fme track --config`).
+    #[arg(long, value_name = "FILE")]
+    pub tracker_config: Option<PathBuf>,
 }
 
 fn print_table(r: &EvalReport) {
@@ -155,8 +162,10 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if !(0.0..=1.0).contains(&args.det_conf) {
         return Err(super::UsageError(format!("--det-conf must be within 0..1, got {}", args.det_conf)).into());
     }
-    let tracker = crate::track::TrackerConfig::preset(&args.tracker)
-        .ok_or_else(|| super::UsageError(format!("--tracker must be default or sort, got {:?}", args.tracker)))?;
+    if crate::track::TrackerConfig::preset(&args.tracker).is_none() {
+        return Err(super::UsageError(format!("--tracker must be default or sort, got {:?}", args.tracker)).into());
+    }
+    let tracker = super::track::load_config(&args.tracker, args.tracker_config.as_deref())?;
     let seq =
         Sequence::open(&args.sequence).with_context(|| format!("opening sequence {}", args.sequence.display()))?;
     let mut opts = EvalOptions {
@@ -169,7 +178,11 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             (false, false) => PostprocessConfig::default(),
         },
         foul_refs: args.foul_refs,
-        depth_sample: args.depth_sample,
+        depth_sample: args.depth_sample.unwrap_or(if args.depth == DepthChoice::Model {
+            DepthSample::Box
+        } else {
+            DepthSample::Centre
+        }),
         threads: args.threads,
         tracker,
         ..Default::default()
@@ -189,6 +202,13 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     opts.postprocess.box_fluctuation =
         (opts.postprocess.box_fluctuation || args.box_fluctuation) && !args.no_box_fluctuation && !args.no_postprocess;
     opts.postprocess.depth_jump &= !args.no_depth_jump;
+    let default_smoothing =
+        if args.depth == DepthChoice::Model { crate::postprocess::ESTIMATED_DEPTH_SMOOTHING.0 } else { 0.0 };
+    let smoothing = args.depth_smoothing.unwrap_or(default_smoothing);
+    if !(smoothing.is_finite() && smoothing >= 0.0) {
+        return Err(super::UsageError(format!("--depth-smoothing must be >= 0 seconds, got {smoothing}")).into());
+    }
+    opts.postprocess.depth_smoothing = Seconds(smoothing);
     opts.motion.validate().map_err(|e| super::UsageError(e.into()))?;
     opts.relative.pixel_noise = args.rel_noise;
     opts.relative.low_freq = args.rel_distortion;

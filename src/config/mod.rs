@@ -116,6 +116,9 @@ impl Config {
         if !["linear", "inverse", "robust"].contains(&self.depth.fit.as_str()) {
             return err("depth.fit", format!("must be linear, inverse or robust, got {:?}", self.depth.fit));
         }
+        if !["box", "centre"].contains(&self.depth.sample.as_str()) {
+            return err("depth.sample", format!("must be box or centre, got {:?}", self.depth.sample));
+        }
         if self.depth.std.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
             return err("depth.std", format!("must be positive, got {:?}", self.depth.std));
         }
@@ -137,6 +140,10 @@ impl Config {
         positive("postprocess.box_ewma_s", self.postprocess.box_ewma_s)?;
         positive("postprocess.depth_jump_m", self.postprocess.depth_jump_m)?;
         positive("postprocess.depth_window_s", self.postprocess.depth_window_s)?;
+        let sm = self.postprocess.depth_smoothing_s;
+        if !(sm.is_finite() && sm >= 0.0) {
+            return err("postprocess.depth_smoothing_s", format!("must be >= 0 s (0 = off), got {sm}"));
+        }
         let m = &self.motion;
         if !(m.body_length_m.is_finite() && m.body_length_m >= 0.0) {
             return err("motion.body_length_m", format!("must be >= 0 m (0 = estimated), got {}", m.body_length_m));

@@ -58,6 +58,10 @@ pub struct DepthConfig {
     pub threads: usize,
     /// Metric fit of relative inverse depth (paper eq. 2): `linear`, `inverse` or `robust`.
     pub fit: String,
+    /// How a fish's depth is read from the map: `box` (25% nearest quantile over the central half of
+    /// its box: the fish, not the water behind a thin or bent fish) or `centre` (small median window at
+    /// the box centre, the paper's choice).
+    pub sample: String,
     /// Input normalisation: channel means (R, G, B) after `/255` (ImageNet; `[0, 0, 0]` for the
     /// official MiDaS v2.1 small ONNX).
     pub mean: [f32; 3],
@@ -72,6 +76,7 @@ impl Default for DepthConfig {
             rate_hz: 5.0,
             threads: 1,
             fit: "robust".into(),
+            sample: "box".into(),
             mean: crate::infer::Normalize::IMAGENET.mean,
             std: crate::infer::Normalize::IMAGENET.std,
         }
@@ -124,6 +129,9 @@ pub struct PostprocessConfig {
     pub depth_jump_m: f64,
     /// Window of the depth EWMA that replaces a jump (eq. 4), s.
     pub depth_window_s: f64,
+    /// Time constant of each fish's depth smoothing after eq. 4, s (0 = off). Not in the paper: the
+    /// depth network's frame-to-frame flicker otherwise becomes speed.
+    pub depth_smoothing_s: f64,
 }
 
 impl Default for PostprocessConfig {
@@ -136,6 +144,7 @@ impl Default for PostprocessConfig {
             depth_jump: d.depth_jump,
             depth_jump_m: d.depth_jump_threshold.0,
             depth_window_s: d.depth_ewma_window.0,
+            depth_smoothing_s: crate::postprocess::ESTIMATED_DEPTH_SMOOTHING.0,
         }
     }
 }

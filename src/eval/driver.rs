@@ -198,8 +198,9 @@ pub struct EvalReport {
     pub boxes_corrected: u64,
     /// Depth corrections by eq. 4 in the main run.
     pub depths_corrected: u64,
-    /// Tracking quality of `--boxes tracker|model` against gt/gt.txt (IoU 0.5).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// Tracking quality of `--boxes tracker|model` against gt/gt.txt (IoU 0.5); its fields appear at
+    /// the top level of the JSON (`idf1`, `mota`, `motp`, `id_switches`, ...).
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
     pub mot: Option<MotSummary>,
     /// Detection quality of `--boxes model` (IoU 0.5; fish under 50% visible are don't-care).
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -62,12 +62,21 @@ impl DetectionScore {
     }
 }
 
-/// Ground-truth boxes of every frame with their visibility (index 0 = frame 1).
+/// Ground-truth boxes of every frame with their visibility (index 0 = frame 1), clipped to the
+/// image (gt.txt boxes are amodal and may reach outside it; a detector can only see the inside).
+/// Fish entirely outside the image are left out.
 fn gt_by_frame(seq: &Sequence) -> Vec<Vec<(u32, PixelBox, f64)>> {
+    let (w, h) = (f64::from(seq.meta.width), f64::from(seq.meta.height));
     let mut out = vec![Vec::new(); seq.len() as usize];
     for g in &seq.gt {
+        let b = g.bbox;
+        let (x0, y0) = (b.x.max(0.0), b.y.max(0.0));
+        let (x1, y1) = ((b.x + b.w).min(w), (b.y + b.h).min(h));
+        if x1 - x0 < 1.0 || y1 - y0 < 1.0 {
+            continue;
+        }
         if let Some(v) = out.get_mut(g.frame as usize - 1) {
-            v.push((g.id, g.bbox, g.visibility));
+            v.push((g.id, PixelBox { x: x0, y: y0, w: x1 - x0, h: y1 - y0 }, g.visibility));
         }
     }
     out

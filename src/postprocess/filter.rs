@@ -34,6 +34,8 @@ pub struct TrackFilter {
     prev_raw: Option<PixelBox>,
     depths: Deque<(f64, f64), HISTORY>,
     jump_since: Option<f64>,
+    /// `(t, depth)` of the exponential depth smoothing (`depth_smoothing`), after eq. 4.
+    smoothed: Option<(f64, f64)>,
 }
 
 /// True when sample time `s` lies within `window` before `t` (with a little slack for rounding, so
@@ -46,7 +48,7 @@ fn within(s: f64, t: f64, window: f64) -> bool {
 impl TrackFilter {
     /// Empty state.
     pub const fn new() -> Self {
-        Self { sizes: Deque::new(), prev_raw: None, depths: Deque::new(), jump_since: None }
+        Self { sizes: Deque::new(), prev_raw: None, depths: Deque::new(), jump_since: None, smoothed: None }
     }
 
     /// Forgets all history (the next observation starts a fresh track).
@@ -138,6 +140,7 @@ impl TrackFilter {
         if self.depths.back().is_some_and(|&(last_t, _)| t <= last_t || t - last_t > window || t.is_nan()) {
             self.depths.clear();
             self.jump_since = None;
+            self.smoothed = None;
         }
         while self.depths.front().is_some_and(|s| !within(s.0, t, window)) || self.depths.is_full() {
             self.depths.pop_front();
@@ -160,6 +163,18 @@ impl TrackFilter {
             }
         }
         let _ = self.depths.push_back((t, out));
+        // Not in the paper: an estimated depth map flickers from frame to frame, and over a 1 s
+        // speed span that flicker becomes speed. An EWMA with time constant tau (real dt) keeps the
+        // slope of a fish's real depth change and removes most of the flicker.
+        let tau = cfg.depth_smoothing.0;
+        if tau > 0.0 {
+            let s = match self.smoothed {
+                Some((ts, prev)) if t > ts => prev + (1.0 - (-(t - ts) / tau).exp()) * (out - prev),
+                _ => out,
+            };
+            self.smoothed = Some((t, s));
+            out = s;
+        }
         (Some(Metres(out)), fired)
     }
 }
@@ -256,5 +271,30 @@ mod tests {
         let off = PostprocessConfig::off();
         assert_eq!(g.correct_depth(&off, Seconds(0.0), Some(Metres(3.0))).0, Some(Metres(3.0)));
         assert_eq!(g.correct_depth(&off, Seconds(DT), Some(Metres(1.0))), (Some(Metres(1.0)), false));
+    }
+
+    #[test]
+    fn depth_smoothing_removes_flicker_and_keeps_the_slope() {
+        let cfg =
+            PostprocessConfig { depth_smoothing: Seconds(2.0), depth_jump: false, ..PostprocessConfig::default() };
+        let mut f = TrackFilter::new();
+        // A fish moving away at 0.3 m/s with +-0.2 m frame-to-frame flicker of the estimated depth.
+        let mut out = Vec::new();
+        for i in 0..300 {
+            let t = i as f64 * DT;
+            let flicker = if i % 2 == 0 { 0.2 } else { -0.2 };
+            out.push(f.correct_depth(&cfg, Seconds(t), Some(Metres(2.0 + 0.3 * t + flicker))).0.unwrap().0);
+        }
+        // After the transient (several tau), the smoothed depth climbs at the true 0.3 m/s...
+        let slope = (out[299] - out[239]) / (60.0 * DT);
+        assert!((slope - 0.3).abs() < 0.01, "slope {slope}");
+        // ... and the flicker is almost gone (raw: 0.4 m between consecutive frames).
+        let step = out[251..300].windows(2).map(|w| (w[1] - w[0] - 0.3 * DT).abs()).fold(0.0, f64::max);
+        assert!(step < 0.01, "frame-to-frame step {step}");
+        // Off by default: the raw value passes through.
+        let mut g = TrackFilter::new();
+        let off = PostprocessConfig { depth_jump: false, ..PostprocessConfig::default() };
+        assert_eq!(g.correct_depth(&off, Seconds(0.0), Some(Metres(2.0))).0, Some(Metres(2.0)));
+        assert_eq!(g.correct_depth(&off, Seconds(DT), Some(Metres(2.4))).0, Some(Metres(2.4)));
     }
 }

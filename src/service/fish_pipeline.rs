@@ -14,9 +14,9 @@ use super::calibration::Calibration;
 use super::pipeline::{ActivitySample, CalibInfo, Pipeline, PipelineError, QualityFlags, StageHealth};
 use crate::capture::Frame;
 use crate::config::Config;
-use crate::geometry::Camera;
+use crate::geometry::{Camera, PixelBox};
 use crate::infer::{self, DepthNet, Detector, InferSchedule, RgbFrame, ScheduleConfig, SessionOptions};
-use crate::metric::{DepthModel, ReferencePoints, ScaleShift, fit, fit_robust};
+use crate::metric::{DepthModel, ReferencePoints, ScaleShift, fit, fit_robust, sample_box_quantile};
 use crate::motion::{ActivityEstimator, TrackObservation};
 use crate::track::{self, Tracker};
 use crate::units::{Metres, MetresPerSecond, Seconds};
@@ -95,6 +95,7 @@ pub struct FishPipeline {
     calib: CalibInfo,
     min_fish: u32,
     body_length: Option<f64>,
+    box_sample: bool,
     rgb: Vec<u8>,
     dets: Vec<track::Detection>,
     obs: Vec<TrackObservation>,
@@ -168,6 +169,7 @@ impl FishPipeline {
             fit_kind,
             fit: None,
             min_fish: cfg.motion.min_fish,
+            box_sample: cfg.depth.sample == "box",
             body_length: (cfg.motion.body_length_m > 0.0).then_some(cfg.motion.body_length_m),
             rgb: Vec::with_capacity(cfg.source.width as usize * cfg.source.height as usize * 3),
             dets: Vec::with_capacity(track::MAX_DETS),
@@ -237,6 +239,7 @@ fn postprocess_config(cfg: &Config) -> crate::postprocess::PostprocessConfig {
         depth_jump: p.depth_jump,
         depth_jump_threshold: Metres(p.depth_jump_m),
         depth_ewma_window: Seconds(p.depth_window_s),
+        depth_smoothing: Seconds(p.depth_smoothing_s),
         ..crate::postprocess::PostprocessConfig::default()
     }
 }
@@ -327,10 +330,17 @@ impl Pipeline for FishPipeline {
         self.health.tracks = self.obs.len() as u32;
         self.health.detector_hz = self.det_rate.hz();
         self.health.depth_hz = self.depth_rate.hz();
-        let (fit, map) = (self.fit, self.depth.last_map());
-        let s = self.estimator.update_with(t, &self.obs, |_, px| {
-            let r = map?.sample(px)?;
-            fit?.depth(f64::from(r))
+        let (fit, map, box_sample) = (self.fit, self.depth.last_map(), self.box_sample);
+        let s = self.estimator.update_with(t, &self.obs, |o, px| {
+            let (fit, map) = (fit?, map?);
+            let r = if box_sample {
+                // Larger relative inverse depth is nearer: the 75% quantile of R is the near quarter.
+                let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
+                sample_box_quantile(&b, 0.5, 0.75, |p| map.sample_with_radius(p, 0).map(f64::from))?
+            } else {
+                f64::from(map.sample(px)?)
+            };
+            fit.depth(r)
         });
         let mean = s.mean.map_or(f64::NAN, |m| m.0);
         let ci95_half = s.ci95.map_or(f64::NAN, |(lo, hi)| 0.5 * (hi.0 - lo.0));

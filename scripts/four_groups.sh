@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# The paper's four groups (Tables 6 and 7) with fme's bundled models, on held-out sequences (seeds
+# never used for training: training uses 1000..1071, its validation 9000..9013):
+#   A  GT boxes + GT depth          B  GT boxes + estimated depth (depth network + robust fit, layout F)
+#   C  predicted boxes + GT depth   D  predicted boxes + estimated depth (detector + tracker + depth network)
+# on single-fish and swarm sequences (30 s each). Prints a table; JSON per run in OUT/results.
+# Usage: scripts/four_groups.sh [OUT_DIR]   (default target/four-groups). FME overrides the binary.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=${1:-target/four-groups}
+FME=${FME:-target/release/fme}
+FRAMES=${FRAMES:-900}
+[ -x "$FME" ] || cargo build --release --locked --bin fme
+mkdir -p "$OUT/results"
+synth() { local out=$1; shift; [ -f "$out/seqinfo.ini" ] || "$FME" synth --out "$out" --force "$@" >/dev/null; }
+# Seeds 7021.. were not used to choose anything (7001-7012 were used to choose the depth smoothing
+# and sampling of estimated depth; see the README).
+synth "$OUT/single-s7021" --preset single --frames "$FRAMES" --seed 7021 --layout F --water 3C
+synth "$OUT/single-s7022" --preset single --frames "$FRAMES" --seed 7022 --layout F --water I
+synth "$OUT/swarm20-s7031" --preset swarm --fish 20 --frames "$FRAMES" --seed 7031 --layout F --water 3C
+synth "$OUT/swarm40-s7032" --preset swarm --fish 40 --frames "$FRAMES" --seed 7032 --layout F --water 1C
+synth "$OUT/swarm60-s7033" --preset swarm --fish 60 --frames "$FRAMES" --seed 7033 --layout F --water 5C
+for seq in single-s7021 single-s7022 swarm20-s7031 swarm40-s7032 swarm60-s7033; do
+  for g in A B C D; do
+    case $g in
+      A) args=(--boxes gt --depth gt) ;;
+      B) args=(--boxes gt --depth model --fit robust) ;;
+      C) args=(--boxes model --depth gt) ;;
+      D) args=(--boxes model --depth model --fit robust) ;;
+    esac
+    "$FME" eval --json --sequence "$OUT/$seq" "${args[@]}" --plot "$OUT/$seq-$g.png" 2>/dev/null > "$OUT/results/$seq-$g.json"
+  done
+done
+python3 - "$OUT/results" <<'PY'
+import json, os, sys
+d = sys.argv[1]
+print(f"{'sequence':15} {'group':6} {'RMSE m/s':>9} {'DistCorr':>8} {'bias':>7} {'true':>6} {'est':>6} {'fish':>5} "
+      f"{'dRMSE m':>8} {'d<1.25':>6} {'IDF1':>6} {'MOTA':>6} {'P':>5} {'R':>5}")
+for f in sorted(os.listdir(d)):
+    r = json.load(open(os.path.join(d, f)))
+    seq, g = f[:-5].rsplit("-", 1)
+    fmt = lambda k, p=3, s=1.0: f"{r[k] * s:.{p}f}" if r.get(k) is not None else "-"
+    det = r.get("detection") or {}
+    print(f"{seq:15} {g:6} {r['speed_rmse_mps']:9.4f} {r['speed_distcorr']:8.3f} {r['speed_bias_mps']:7.3f} "
+          f"{r['mean_true_mps']:6.3f} {r['mean_est_mps']:6.3f} {r['mean_fish']:5.1f} {fmt('depth_rmse_m'):>8} "
+          f"{fmt('depth_delta_1_25', 2):>6} {fmt('idf1', 1, 100):>6} {fmt('mota', 1, 100):>6} "
+          f"{det.get('precision', float('nan')):5.2f} {det.get('recall', float('nan')):5.2f}")
+PY
