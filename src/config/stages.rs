@@ -32,6 +32,8 @@ pub struct DetectorConfig {
     pub nms_iou: f64,
     /// ONNX Runtime intra-op threads.
     pub threads: usize,
+    /// Drop detections on the calibrated reference cubes (they look like small fish to a detector).
+    pub ignore_references: bool,
 }
 
 impl Default for DetectorConfig {
@@ -42,6 +44,7 @@ impl Default for DetectorConfig {
             confidence: 0.3,
             nms_iou: 0.5,
             threads: 1,
+            ignore_references: true,
         }
     }
 }

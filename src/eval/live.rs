@@ -7,6 +7,7 @@ use super::EvalError;
 use super::boxes::IndexedBoxes;
 use crate::geometry::PixelBox;
 use crate::infer::{Detector, RgbFrame};
+use crate::metric::ReferenceFootprints;
 use crate::mot::{MotAccumulator, MotMetrics};
 use crate::sequence::Sequence;
 use crate::track::tune::{DetNoise, GtObs, TuneSequence, synth_detections};
@@ -117,11 +118,14 @@ pub fn read_detections(path: &std::path::Path, frames: u32) -> Result<Vec<Vec<De
 }
 
 /// Runs the detector on every frame image; returns the detections per frame and their score.
+/// Detections on the reference cubes are dropped first, as `fme run` does (`detector.ignore_references`).
 pub fn model_detections(
     seq: &Sequence,
     detector: &mut Detector,
 ) -> Result<(Vec<Vec<Detection>>, DetectionScore), EvalError> {
     let gt = gt_by_frame(seq);
+    let cubes = seq.meta.reference_objects.iter().map(|r| (r.center(), r.size()));
+    let footprints = ReferenceFootprints::project(&seq.camera, cubes);
     let mut score = DetectionScore::default();
     let mut out = Vec::with_capacity(seq.len() as usize);
     let mut frame_gt = Vec::new();
@@ -134,7 +138,12 @@ pub fn model_detections(
         let d = detector
             .detect(&rgb, seq.timestamp(frame))
             .map_err(|e| EvalError::Input { path: path.clone(), msg: e.to_string() })?;
-        let dets: Vec<Detection> = d.items.iter().map(|x| Detection::new(x.bbox, f64::from(x.score))).collect();
+        let dets: Vec<Detection> = d
+            .items
+            .iter()
+            .filter(|x| !footprints.covers(&x.bbox))
+            .map(|x| Detection::new(x.bbox, f64::from(x.score)))
+            .collect();
         frame_gt.clear();
         frame_gt.extend(gt[frame as usize - 1].iter().map(|&(_, b, v)| (b, v)));
         score.add_frame(&dets, &frame_gt);

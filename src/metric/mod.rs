@@ -20,7 +20,7 @@ pub mod regressors;
 mod sample;
 
 pub use fit::{DepthModel, FitError, ReferencePair, References, ScaleShift, fit, fit_robust};
-pub use references::ReferencePoints;
+pub use references::{ReferenceFootprints, ReferencePoints};
 pub use sample::{MAX_RADIUS, RelativeMap, sample_box_quantile, sample_median};
 
 /// Most reference objects a scene may have (the paper uses ten).

@@ -56,6 +56,63 @@ impl ReferencePoints {
     }
 }
 
+/// The image footprints of the reference objects (axis-aligned cubes), for telling the detector's
+/// false positives on them from fish: a reference cube looks enough like a small fish to be detected.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReferenceFootprints {
+    boxes: heapless::Vec<crate::geometry::PixelBox, MAX_REFERENCES>,
+}
+
+impl ReferenceFootprints {
+    /// The bounding box of each cube's eight projected corners (cubes behind the camera are left out).
+    pub fn project(camera: &Camera, cubes: impl IntoIterator<Item = (WorldPoint, Metres)>) -> Self {
+        let mut out = Self::default();
+        for (c, size) in cubes {
+            let h = 0.5 * size.0;
+            let (mut u0, mut v0, mut u1, mut v1) = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+            let mut ok = true;
+            for k in 0..8 {
+                let d = |bit: usize| if k & bit == 0 { -h } else { h };
+                let p = WorldPoint::new(c.0.x + d(1), c.0.y + d(2), c.0.z + d(4));
+                match camera.world_to_pixel(&p) {
+                    Ok(px) => {
+                        (u0, v0, u1, v1) = (u0.min(px.u), v0.min(px.v), u1.max(px.u), v1.max(px.v));
+                    }
+                    Err(_) => ok = false,
+                }
+            }
+            if ok && out.boxes.push(crate::geometry::PixelBox::new(u0, v0, u1 - u0, v1 - v0)).is_err() {
+                break;
+            }
+        }
+        out
+    }
+
+    /// Whether a detection is most likely a reference cube: its centre lies within a cube's
+    /// footprint widened by one footprint on every side, and it is at most four times the footprint's
+    /// area (a fish passing in front of a cube is nearer, so larger, and is kept).
+    pub fn covers(&self, det: &crate::geometry::PixelBox) -> bool {
+        let c = det.center();
+        self.boxes.iter().any(|r| {
+            c.u >= r.x - r.w
+                && c.u <= r.x + 2.0 * r.w
+                && c.v >= r.y - r.h
+                && c.v <= r.y + 2.0 * r.h
+                && det.area() <= 4.0 * r.area()
+        })
+    }
+
+    /// Number of footprints.
+    pub fn len(&self) -> usize {
+        self.boxes.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.boxes.is_empty()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -79,5 +136,11 @@ mod tests {
         assert_eq!(pairs.len(), 1);
         assert!(r.pairs(|_| None).is_empty());
         assert!(r.pairs(|_| Some(f64::NAN)).is_empty());
+        // A 0.1 m cube 2 m ahead: about 0.1 * 320 / 2 = 16 px wide at the image centre.
+        let f = ReferenceFootprints::project(&camera, [(WorldPoint::new(0.0, 0.0, 2.0), Metres(0.1))]);
+        assert_eq!(f.len(), 1);
+        assert!(f.covers(&crate::geometry::PixelBox::new(312.0, 184.0, 16.0, 16.0)), "the cube itself");
+        assert!(!f.covers(&crate::geometry::PixelBox::new(270.0, 170.0, 100.0, 40.0)), "a near fish in front of it");
+        assert!(!f.covers(&crate::geometry::PixelBox::new(100.0, 100.0, 16.0, 16.0)), "elsewhere");
     }
 }

@@ -3,6 +3,7 @@
 
 use crate::geometry::{Camera, Pose, WorldPoint};
 use crate::sequence::{CameraMeta, ReferenceObject};
+use crate::units::Metres;
 use std::path::{Path, PathBuf};
 
 /// The calibration file: the `camera` block and `reference_objects` of a sequence's `meta.json`;
@@ -23,6 +24,8 @@ pub struct Calibration {
     pub camera: Camera,
     /// The camera-facing surface of each reference object, world frame (what a depth map sees).
     pub references: Vec<WorldPoint>,
+    /// Each reference cube's centre and edge length (for telling detections on them from fish).
+    pub cubes: Vec<(WorldPoint, Metres)>,
 }
 
 impl Calibration {
@@ -40,7 +43,8 @@ impl Calibration {
         if references.iter().any(|p| !(p.0.x.is_finite() && p.0.y.is_finite() && p.0.z.is_finite())) {
             return Err(format!("{}: reference_objects: a position is not finite", path.display()));
         }
-        Ok(Self { path: path.to_path_buf(), camera: Camera { intrinsics, pose }, references })
+        let cubes = f.reference_objects.iter().map(|r| (r.center(), r.size())).collect();
+        Ok(Self { path: path.to_path_buf(), camera: Camera { intrinsics, pose }, references, cubes })
     }
 }
 

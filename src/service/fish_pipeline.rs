@@ -16,7 +16,9 @@ use crate::capture::Frame;
 use crate::config::Config;
 use crate::geometry::{Camera, PixelBox};
 use crate::infer::{self, DepthNet, Detector, InferSchedule, RgbFrame, ScheduleConfig, SessionOptions};
-use crate::metric::{DepthModel, ReferencePoints, ScaleShift, fit, fit_robust, sample_box_quantile};
+use crate::metric::{
+    DepthModel, ReferenceFootprints, ReferencePoints, ScaleShift, fit, fit_robust, sample_box_quantile,
+};
 use crate::motion::{ActivityEstimator, TrackObservation};
 use crate::track::{self, Tracker};
 use crate::units::{Metres, MetresPerSecond, Seconds};
@@ -90,6 +92,7 @@ pub struct FishPipeline {
     tracker: Tracker,
     estimator: ActivityEstimator,
     refs: ReferencePoints,
+    footprints: ReferenceFootprints,
     fit_kind: FitKind,
     fit: Option<ScaleShift>,
     calib: CalibInfo,
@@ -150,6 +153,10 @@ impl FishPipeline {
             .as_ref()
             .map(|c| ReferencePoints::project(&camera, c.references.iter().copied(), w, h))
             .unwrap_or_default();
+        let footprints = match (&calibration, cfg.detector.ignore_references) {
+            (Some(c), true) => ReferenceFootprints::project(&camera, c.cubes.iter().copied()),
+            _ => ReferenceFootprints::default(),
+        };
         let fit_kind = FitKind::parse(&cfg.depth.fit).ok_or_else(|| format!("depth.fit: {:?}", cfg.depth.fit))?;
         let schedule_cfg = ScheduleConfig { detect_hz: cfg.detector.rate_hz, depth_hz: cfg.depth.rate_hz };
         let motion = motion_config(cfg);
@@ -166,6 +173,7 @@ impl FishPipeline {
             estimator: ActivityEstimator::new(camera, motion, post),
             calib: CalibInfo { references_visible: refs.len() as u32, ..CalibInfo::default() },
             refs,
+            footprints,
             fit_kind,
             fit: None,
             min_fish: cfg.motion.min_fish,
@@ -296,7 +304,13 @@ impl Pipeline for FishPipeline {
                 match self.detector.detect(&rgb, t) {
                     Ok(d) => {
                         self.dets.clear();
-                        self.dets.extend(d.items.iter().map(|x| track::Detection::new(x.bbox, f64::from(x.score))));
+                        let footprints = &self.footprints;
+                        self.dets.extend(
+                            d.items
+                                .iter()
+                                .filter(|x| !footprints.covers(&x.bbox))
+                                .map(|x| track::Detection::new(x.bbox, f64::from(x.score))),
+                        );
                         self.health.detector_ok = true;
                         self.det_rate.record(t.0);
                     }
