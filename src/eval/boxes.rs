@@ -103,7 +103,7 @@ impl BoxesChoice {
         match self {
             Self::Gt => Ok(Box::new(IndexedBoxes::ground_truth(seq))),
             Self::File(p) => Ok(Box::new(IndexedBoxes::from_mot_file(p, seq.len())?)),
-            Self::Tracker | Self::Model => Err(EvalError::NotAvailable("--boxes tracker|model outside eval::evaluate")),
+            Self::Tracker | Self::Model => Err(EvalError::NotAvailable("--boxes tracker|model")),
         }
     }
 }

@@ -39,8 +39,8 @@ pub enum EvalError {
     /// A model or ONNX Runtime problem (the message names the file).
     #[error("{0}")]
     Model(String),
-    /// An option whose implementation comes with a later issue.
-    #[error("{0} is not available yet")]
+    /// A box source that only the evaluation driver can build (it needs the driver's options).
+    #[error("{0} is built by eval::evaluate, not by BoxesChoice::provider")]
     NotAvailable(&'static str),
     /// Writing an output (series, plot) failed.
     #[error("{path}: {msg}")]

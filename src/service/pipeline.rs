@@ -132,7 +132,7 @@ impl FrameDiffPipeline {
     /// Grid cells per side used for the grey-level comparison.
     pub const GRID: usize = 32;
 
-    /// A stand-in with EWMA time constant `smoothing_s` and body length `body_length_m`.
+    /// A test double with EWMA time constant `smoothing_s` and body length `body_length_m`.
     pub fn new(smoothing_s: f64, body_length_m: f64) -> Self {
         Self {
             prev: vec![0; Self::GRID * Self::GRID],
