@@ -162,10 +162,8 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if !(0.0..=1.0).contains(&args.det_conf) {
         return Err(super::UsageError(format!("--det-conf must be within 0..1, got {}", args.det_conf)).into());
     }
-    if crate::track::TrackerConfig::preset(&args.tracker).is_none() {
-        return Err(super::UsageError(format!("--tracker must be default or sort, got {:?}", args.tracker)).into());
-    }
-    let tracker = super::track::load_config(&args.tracker, args.tracker_config.as_deref())?;
+    let tracker = super::track::load_config(&args.tracker, args.tracker_config.as_deref())
+        .context("--tracker / --tracker-config")?;
     let seq =
         Sequence::open(&args.sequence).with_context(|| format!("opening sequence {}", args.sequence.display()))?;
     let mut opts = EvalOptions {

@@ -107,24 +107,8 @@ pub fn load_sequence(dir: &Path, min_visibility: f64) -> anyhow::Result<TuneSequ
     })
 }
 
-/// Reads a MOTChallenge detection file into per-frame lists (index 0 = frame 1); rows beyond
-/// `frames` are an error naming the file and line.
-pub fn read_detections(path: &Path, frames: u32) -> anyhow::Result<Vec<Vec<crate::track::Detection>>> {
-    let rows = crate::mot::io::read_file(path, crate::mot::ReadOptions::default())?;
-    let mut out = vec![Vec::new(); frames as usize];
-    for (k, r) in rows.iter().enumerate() {
-        let slot = out.get_mut(r.frame as usize - 1).ok_or_else(|| {
-            anyhow::anyhow!(
-                "{}: row {}: frame {} is beyond the sequence's {frames} frames",
-                path.display(),
-                k + 1,
-                r.frame
-            )
-        })?;
-        slot.push(crate::track::Detection::new(r.bbox, r.score));
-    }
-    Ok(out)
-}
+/// Reads `det/det.txt`-style detections (one implementation for `fme tune` and `fme eval`).
+pub use crate::mot::io::read_detections;
 
 fn key(m: &MotMetrics, metric: TuneMetric) -> (f64, f64) {
     match metric {

@@ -113,12 +113,6 @@ impl Config {
         if self.depth.threads == 0 {
             return err("depth.threads", "must be >= 1");
         }
-        if !["linear", "inverse", "robust"].contains(&self.depth.fit.as_str()) {
-            return err("depth.fit", format!("must be linear, inverse or robust, got {:?}", self.depth.fit));
-        }
-        if !["box", "centre"].contains(&self.depth.sample.as_str()) {
-            return err("depth.sample", format!("must be box or centre, got {:?}", self.depth.sample));
-        }
         if self.depth.std.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
             return err("depth.std", format!("must be positive, got {:?}", self.depth.std));
         }

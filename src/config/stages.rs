@@ -60,11 +60,10 @@ pub struct DepthConfig {
     /// ONNX Runtime intra-op threads.
     pub threads: usize,
     /// Metric fit of relative inverse depth (paper eq. 2): `linear`, `inverse` or `robust`.
-    pub fit: String,
-    /// How a fish's depth is read from the map: `box` (25% nearest quantile over the central half of
-    /// its box: the fish, not the water behind a thin or bent fish) or `centre` (small median window at
-    /// the box centre, the paper's choice).
-    pub sample: String,
+    pub fit: crate::metric::FitMethod,
+    /// How a fish's depth is read from the map: `box` (nearest quarter of the central half of its box:
+    /// the fish, not the water behind a thin or bent fish) or `centre` (the paper's choice).
+    pub sample: crate::metric::DepthSample,
     /// Input normalisation: channel means (R, G, B) after `/255` (ImageNet; `[0, 0, 0]` for the
     /// official MiDaS v2.1 small ONNX).
     pub mean: [f32; 3],
@@ -78,8 +77,8 @@ impl Default for DepthConfig {
             model: PathBuf::from("models/fish_depth_int8.onnx"),
             rate_hz: 5.0,
             threads: 1,
-            fit: "robust".into(),
-            sample: "box".into(),
+            fit: crate::metric::FitMethod::Robust,
+            sample: crate::metric::DepthSample::Box,
             mean: crate::infer::Normalize::IMAGENET.mean,
             std: crate::infer::Normalize::IMAGENET.std,
         }

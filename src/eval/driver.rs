@@ -6,9 +6,11 @@ use super::relative::{RelativeGtParams, relative_at, sample_relative};
 use super::{BoxProvider, BoxesChoice, EvalError};
 use crate::geometry::{Pixel, PixelBox};
 use crate::infer::{self, DepthNet, Detector, RelDepthMap, RgbFrame, SessionOptions};
+pub use crate::metric::DepthSample;
 use crate::metric::regressors::{Regressor, RegressorKind};
 use crate::metric::{
-    DepthModel, ReferencePair, References, RelativeMap, ScaleShift, fit, fit_robust, sample_box_quantile, sample_median,
+    FitMethod, ROBUST_INLIER, ReferencePair, ReferencePoints, References, RelativeMap, ScaleShift, sample_box_quantile,
+    sample_median,
 };
 use crate::mot::MotMetrics;
 use crate::motion::{ActivityEstimator, MotionConfig, TrackObservation};
@@ -47,17 +49,6 @@ pub enum FitChoice {
     Tree,
     /// k-nearest neighbours (Table 4).
     Knn,
-}
-
-/// How a fish's depth is read from the depth map (`--depth-sample`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum DepthSample {
-    /// Median of a 5x5 window at the (corrected) box centre: the paper's "depth at the centre point".
-    Centre,
-    /// 25% quantile of depth over the central half of the box (nearest quarter: the fish, not the
-    /// wall behind a thin or bent fish).
-    Box,
 }
 
 /// Everything `fme eval` can vary.
@@ -106,7 +97,7 @@ impl Default for EvalOptions {
             relative: RelativeGtParams::default(),
             foul_refs: 0,
             window_radius: 2,
-            robust_inlier: (Metres(0.1), 0.05),
+            robust_inlier: ROBUST_INLIER,
             depth_sample: DepthSample::Centre,
             detector: infer::DetectorConfig { class_agnostic: true, ..infer::DetectorConfig::default() },
             depth_model: infer::DepthConfig::default(),
@@ -252,7 +243,7 @@ fn box_source(seq: &Sequence, opts: &EvalOptions) -> Result<BoxSource, EvalError
         BoxesChoice::Tracker => {
             let det_file = seq.dir.join("det").join("det.txt");
             let dets = if det_file.is_file() {
-                live::read_detections(&det_file, seq.len())?
+                crate::mot::io::read_detections(&det_file, seq.len())?
             } else {
                 live::synthetic_detections(seq, opts.det_seed)
             };
@@ -274,12 +265,9 @@ fn box_source(seq: &Sequence, opts: &EvalOptions) -> Result<BoxSource, EvalError
 
 /// Runs the depth network on frame `frame` of `seq`.
 fn model_depth<'a>(seq: &Sequence, net: &'a mut DepthNet, frame: u32) -> Result<&'a RelDepthMap, EvalError> {
-    let path = seq.frame_path(frame);
-    let img = image::open(&path)
-        .map_err(|e| EvalError::Input { path: path.clone(), msg: format!("cannot read frame: {e}") })?
-        .to_rgb8();
+    let img = live::read_frame_rgb(seq, frame)?;
     net.estimate(&RgbFrame::from(&img), seq.timestamp(frame))
-        .map_err(|e| EvalError::Input { path: path.clone(), msg: e.to_string() })
+        .map_err(|e| EvalError::Input { path: seq.frame_path(frame), msg: e.to_string() })
 }
 
 enum Fitted {
@@ -298,11 +286,9 @@ impl Fitted {
 
 fn fit_frame(opts: &EvalOptions, refs: &References) -> Result<Fitted, crate::metric::FitError> {
     Ok(match opts.fit {
-        FitChoice::Linear => Fitted::Ss(fit(DepthModel::Linear, refs)?),
-        FitChoice::Inverse => Fitted::Ss(fit(DepthModel::Inverse, refs)?),
-        FitChoice::Robust => {
-            Fitted::Ss(fit_robust(DepthModel::Inverse, refs, opts.robust_inlier.0, opts.robust_inlier.1)?)
-        }
+        FitChoice::Linear => Fitted::Ss(FitMethod::Linear.fit(refs, opts.robust_inlier)?),
+        FitChoice::Inverse => Fitted::Ss(FitMethod::Inverse.fit(refs, opts.robust_inlier)?),
+        FitChoice::Robust => Fitted::Ss(FitMethod::Robust.fit(refs, opts.robust_inlier)?),
         FitChoice::Poly2 => Fitted::Reg(Box::new(Regressor::fit(RegressorKind::Poly2, refs)?)),
         FitChoice::Tree => Fitted::Reg(Box::new(Regressor::fit(RegressorKind::Tree, refs)?)),
         FitChoice::Knn => Fitted::Reg(Box::new(Regressor::fit(RegressorKind::Knn, refs)?)),
@@ -335,17 +321,8 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
     let estimated = opts.depth != DepthChoice::Gt;
     let (w, h) = (seq.meta.width as usize, seq.meta.height as usize);
     // Reference points: projected once (the camera is fixed); hidden ones are left out.
-    let ref_px: Vec<(Pixel, Metres)> = seq
-        .meta
-        .reference_objects
-        .iter()
-        .filter_map(|r| {
-            let p = r.front_face_center();
-            let px = seq.camera.world_to_pixel(&p).ok()?;
-            let inside = px.u >= 0.0 && px.v >= 0.0 && px.u < w as f64 && px.v < h as f64;
-            inside.then(|| (px, seq.camera.pose.to_camera(&p).depth()))
-        })
-        .collect();
+    let faces = seq.meta.reference_objects.iter().map(|r| r.front_face_center());
+    let ref_px = ReferencePoints::project(&seq.camera, faces, seq.meta.width, seq.meta.height);
     // True swarm speed per frame: mean |v| of the fish visible in it.
     let mut true_sum = vec![(0.0f64, 0usize); seq.len() as usize + 1];
     for r in &seq.world {
@@ -395,12 +372,12 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         };
         if estimated {
             let mut refs = References::new();
-            for (i, (px, d)) in ref_px.iter().enumerate() {
-                if let Some(mut r) = rel(*px) {
+            for (i, (px, depth)) in ref_px.iter().enumerate() {
+                if let Some(mut r) = rel(px) {
                     if i < opts.foul_refs {
                         r *= 1.5;
                     }
-                    let _ = refs.push(ReferencePair { relative: r, depth: *d });
+                    let _ = refs.push(ReferencePair { relative: r, depth });
                 }
             }
             match fit_frame(opts, &refs) {

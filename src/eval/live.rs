@@ -101,20 +101,13 @@ pub fn synthetic_detections(seq: &Sequence, seed: u64) -> Vec<Vec<Detection>> {
     synth_detections(&ts, &DetNoise::default(), seed)
 }
 
-/// Reads a MOTChallenge detection file (`frame,-1,x,y,w,h,score,...`) into per-frame lists (index
-/// 0 = frame 1); a frame beyond the sequence is an error naming the file.
-pub fn read_detections(path: &std::path::Path, frames: u32) -> Result<Vec<Vec<Detection>>, EvalError> {
-    let rows = crate::mot::io::read_file(path, crate::mot::ReadOptions::default())
-        .map_err(|e| EvalError::Input { path: path.to_path_buf(), msg: e.to_string() })?;
-    let mut out = vec![Vec::new(); frames as usize];
-    for r in rows {
-        let slot = (r.frame as usize).checked_sub(1).and_then(|i| out.get_mut(i)).ok_or_else(|| EvalError::Input {
-            path: path.to_path_buf(),
-            msg: format!("frame {} is outside the sequence's 1..={frames}", r.frame),
-        })?;
-        slot.push(Detection::new(r.bbox, r.score));
+/// Reads frame `frame` (1-based) of `seq` as RGB.
+pub(crate) fn read_frame_rgb(seq: &Sequence, frame: u32) -> Result<image::RgbImage, EvalError> {
+    let path = seq.frame_path(frame);
+    match image::open(&path) {
+        Ok(img) => Ok(img.to_rgb8()),
+        Err(e) => Err(EvalError::Input { path, msg: format!("cannot read frame: {e}") }),
     }
-    Ok(out)
 }
 
 /// Runs the detector on every frame image; returns the detections per frame and their score.
@@ -130,14 +123,10 @@ pub fn model_detections(
     let mut out = Vec::with_capacity(seq.len() as usize);
     let mut frame_gt = Vec::new();
     for frame in 1..=seq.len() {
-        let path = seq.frame_path(frame);
-        let img = image::open(&path)
-            .map_err(|e| EvalError::Input { path: path.clone(), msg: format!("cannot read frame: {e}") })?
-            .to_rgb8();
-        let rgb = RgbFrame::from(&img);
+        let img = read_frame_rgb(seq, frame)?;
         let d = detector
-            .detect(&rgb, seq.timestamp(frame))
-            .map_err(|e| EvalError::Input { path: path.clone(), msg: e.to_string() })?;
+            .detect(&RgbFrame::from(&img), seq.timestamp(frame))
+            .map_err(|e| EvalError::Input { path: seq.frame_path(frame), msg: e.to_string() })?;
         let dets: Vec<Detection> = d
             .items
             .iter()

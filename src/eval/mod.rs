@@ -36,6 +36,9 @@ pub enum EvalError {
         /// What is wrong.
         msg: String,
     },
+    /// A detection or track file could not be read or parsed (names the file and line).
+    #[error(transparent)]
+    Mot(#[from] crate::mot::MotError),
     /// A model or ONNX Runtime problem (the message names the file).
     #[error("{0}")]
     Model(String),

@@ -19,9 +19,9 @@ mod references;
 pub mod regressors;
 mod sample;
 
-pub use fit::{DepthModel, FitError, ReferencePair, References, ScaleShift, fit, fit_robust};
+pub use fit::{DepthModel, FitError, FitMethod, ROBUST_INLIER, ReferencePair, References, ScaleShift, fit, fit_robust};
 pub use references::{ReferenceFootprints, ReferencePoints};
-pub use sample::{MAX_RADIUS, RelativeMap, sample_box_quantile, sample_median};
+pub use sample::{DepthSample, MAX_RADIUS, RelativeMap, sample_box_quantile, sample_median};
 
 /// Most reference objects a scene may have (the paper uses ten).
 pub const MAX_REFERENCES: usize = 32;

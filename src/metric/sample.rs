@@ -2,6 +2,17 @@
 
 use crate::geometry::Pixel;
 
+/// How a fish's depth is read from a depth map (`depth.sample`, `fme eval --depth-sample`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DepthSample {
+    /// A small median window at the (corrected) box centre: the paper's "depth at the centre point".
+    Centre,
+    /// A quantile over the central half of the box taking its nearest quarter ([`sample_box_quantile`]):
+    /// the fish, not the water or wall behind a thin or bent fish.
+    Box,
+}
+
 /// A borrowed single-channel map (relative inverse depth, or metric depth), row-major.
 #[derive(Debug, Clone, Copy)]
 pub struct RelativeMap<'a> {

@@ -38,6 +38,16 @@ pub enum MotError {
         /// What is wrong.
         msg: String,
     },
+    /// A row's frame lies outside the sequence it is read for.
+    #[error("{path}: frame {frame} is beyond the sequence's {frames} frames")]
+    Beyond {
+        /// The file.
+        path: PathBuf,
+        /// The row's frame.
+        frame: u32,
+        /// Frames in the sequence.
+        frames: u32,
+    },
 }
 
 /// What a reader accepts.
@@ -107,6 +117,19 @@ pub fn read_rows(reader: impl BufRead, path: &Path, opts: ReadOptions) -> Result
 pub fn read_file(path: &Path, opts: ReadOptions) -> Result<Vec<MotRow>, MotError> {
     let f = std::fs::File::open(path).map_err(|source| MotError::Io { path: path.to_path_buf(), source })?;
     read_rows(std::io::BufReader::new(f), path, opts)
+}
+
+/// Reads a MOTChallenge detection file (`frame,-1,x,y,w,h,score,...`) into per-frame lists for a
+/// sequence of `frames` frames (index 0 = frame 1); a row beyond the sequence is an error naming the file.
+pub fn read_detections(path: &Path, frames: u32) -> Result<Vec<Vec<crate::track::Detection>>, MotError> {
+    let rows = read_file(path, ReadOptions::default())?;
+    let mut out = vec![Vec::new(); frames as usize];
+    for r in rows {
+        let beyond = || MotError::Beyond { path: path.to_path_buf(), frame: r.frame, frames };
+        let slot = (r.frame as usize).checked_sub(1).and_then(|i| out.get_mut(i)).ok_or_else(beyond)?;
+        slot.push(crate::track::Detection::new(r.bbox, r.score));
+    }
+    Ok(out)
 }
 
 /// Sorts rows by frame (stable) and returns `(frame, range)` for every frame that has rows, in

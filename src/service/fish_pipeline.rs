@@ -17,46 +17,11 @@ use crate::config::Config;
 use crate::geometry::{Camera, PixelBox};
 use crate::infer::{self, DepthNet, Detector, InferSchedule, RgbFrame, ScheduleConfig, SessionOptions};
 use crate::metric::{
-    DepthModel, ReferenceFootprints, ReferencePoints, ScaleShift, fit, fit_robust, sample_box_quantile,
+    DepthSample, FitMethod, ROBUST_INLIER, ReferenceFootprints, ReferencePoints, ScaleShift, sample_box_quantile,
 };
 use crate::motion::{ActivityEstimator, TrackObservation};
 use crate::track::{self, Tracker};
 use crate::units::{Metres, MetresPerSecond, Seconds};
-use std::path::{Path, PathBuf};
-
-/// Inlier tolerance of the robust fit: `max(0.1 m, 5% of the depth)` (as `fme eval`).
-const ROBUST_INLIER: (Metres, f64) = (Metres(0.1), 0.05);
-
-/// The metric-fit choice of `depth.fit`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FitKind {
-    /// Paper eq. 2, `D = s*R + t`.
-    Linear,
-    /// `1/D = s*R + t`.
-    Inverse,
-    /// The inverse model by exhaustive-pair RANSAC (survives fouled references).
-    Robust,
-}
-
-impl FitKind {
-    /// From the config string (validated by [`Config::validate`]).
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "linear" => Some(Self::Linear),
-            "inverse" => Some(Self::Inverse),
-            "robust" => Some(Self::Robust),
-            _ => None,
-        }
-    }
-
-    fn fit(self, refs: &[crate::metric::ReferencePair]) -> Result<ScaleShift, crate::metric::FitError> {
-        match self {
-            Self::Linear => fit(DepthModel::Linear, refs),
-            Self::Inverse => fit(DepthModel::Inverse, refs),
-            Self::Robust => fit_robust(DepthModel::Inverse, refs, ROBUST_INLIER.0, ROBUST_INLIER.1),
-        }
-    }
-}
 
 /// Achieved run rate of a stage over the last few seconds of frame time (fixed size).
 #[derive(Debug, Clone, Copy, Default)]
@@ -93,12 +58,12 @@ pub struct FishPipeline {
     estimator: ActivityEstimator,
     refs: ReferencePoints,
     footprints: ReferenceFootprints,
-    fit_kind: FitKind,
+    fit_method: FitMethod,
     fit: Option<ScaleShift>,
     calib: CalibInfo,
     min_fish: u32,
     body_length: Option<f64>,
-    box_sample: bool,
+    depth_sample: DepthSample,
     rgb: Vec<u8>,
     dets: Vec<track::Detection>,
     obs: Vec<TrackObservation>,
@@ -106,7 +71,6 @@ pub struct FishPipeline {
     health: StageHealth,
     det_rate: RateMeter,
     depth_rate: RateMeter,
-    calibration_file: Option<PathBuf>,
 }
 
 impl std::fmt::Debug for FishPipeline {
@@ -157,7 +121,6 @@ impl FishPipeline {
             (Some(c), true) => ReferenceFootprints::project(&camera, c.cubes.iter().copied()),
             _ => ReferenceFootprints::default(),
         };
-        let fit_kind = FitKind::parse(&cfg.depth.fit).ok_or_else(|| format!("depth.fit: {:?}", cfg.depth.fit))?;
         let schedule_cfg = ScheduleConfig { detect_hz: cfg.detector.rate_hz, depth_hz: cfg.depth.rate_hz };
         let motion = motion_config(cfg);
         let post = postprocess_config(cfg);
@@ -174,10 +137,10 @@ impl FishPipeline {
             calib: CalibInfo { references_visible: refs.len() as u32, ..CalibInfo::default() },
             refs,
             footprints,
-            fit_kind,
+            fit_method: cfg.depth.fit,
             fit: None,
             min_fish: cfg.motion.min_fish,
-            box_sample: cfg.depth.sample == "box",
+            depth_sample: cfg.depth.sample,
             body_length: (cfg.motion.body_length_m > 0.0).then_some(cfg.motion.body_length_m),
             rgb: Vec::with_capacity(cfg.source.width as usize * cfg.source.height as usize * 3),
             dets: Vec::with_capacity(track::MAX_DETS),
@@ -186,13 +149,7 @@ impl FishPipeline {
             health: StageHealth::default(),
             det_rate: RateMeter::default(),
             depth_rate: RateMeter::default(),
-            calibration_file: calibration.map(|c| c.path),
         })
-    }
-
-    /// The calibration file in use, if any.
-    pub fn calibration_file(&self) -> Option<&Path> {
-        self.calibration_file.as_deref()
     }
 
     /// Starts over after time went backwards (camera restarted): tracks, speeds and schedules are
@@ -209,7 +166,7 @@ impl FishPipeline {
         let Some(map) = self.depth.last_map() else { return };
         let refs = self.refs.pairs(|px| map.sample(px).map(f64::from));
         self.calib.references_visible = refs.len() as u32;
-        match self.fit_kind.fit(&refs) {
+        match self.fit_method.fit(&refs, ROBUST_INLIER) {
             Ok(f) => {
                 self.fit = Some(f);
                 self.calib = CalibInfo {
@@ -344,15 +301,16 @@ impl Pipeline for FishPipeline {
         self.health.tracks = self.obs.len() as u32;
         self.health.detector_hz = self.det_rate.hz();
         self.health.depth_hz = self.depth_rate.hz();
-        let (fit, map, box_sample) = (self.fit, self.depth.last_map(), self.box_sample);
+        let (fit, map, how) = (self.fit, self.depth.last_map(), self.depth_sample);
         let s = self.estimator.update_with(t, &self.obs, |o, px| {
             let (fit, map) = (fit?, map?);
-            let r = if box_sample {
-                // Larger relative inverse depth is nearer: the 75% quantile of R is the near quarter.
-                let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
-                sample_box_quantile(&b, 0.5, 0.75, |p| map.sample_with_radius(p, 0).map(f64::from))?
-            } else {
-                f64::from(map.sample(px)?)
+            let r = match how {
+                DepthSample::Box => {
+                    // Larger relative inverse depth is nearer: the 75% quantile of R is the near quarter.
+                    let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
+                    sample_box_quantile(&b, 0.5, 0.75, |p| map.sample_with_radius(p, 0).map(f64::from))?
+                }
+                DepthSample::Centre => f64::from(map.sample(px)?),
             };
             fit.depth(r)
         });
