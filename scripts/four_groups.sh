@@ -3,24 +3,26 @@
 # never used for training: training uses 1000..1071, its validation 9000..9013):
 #   A  GT boxes + GT depth          B  GT boxes + estimated depth (depth network + robust fit, layout F)
 #   C  predicted boxes + GT depth   D  predicted boxes + estimated depth (detector + tracker + depth network)
-# on single-fish and swarm sequences (30 s each). Prints a table; JSON per run in OUT/results.
+# on single-fish and swarm sequences (30 s each). Prints a table; JSON per run in OUT/results-SEED_BASE.
 # Usage: scripts/four_groups.sh [OUT_DIR]   (default target/four-groups). FME overrides the binary.
+# SEED_BASE (default 7021) picks the set: seeds B, B+1 (single fish), B+10..B+12 (swarms); 7041 is a
+# second set, never used to choose anything (7021's was used to choose the depth loss's focus weight).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-target/four-groups}
 FME=${FME:-target/release/fme}
 FRAMES=${FRAMES:-900}
+B=${SEED_BASE:-7021}
 [ -x "$FME" ] || cargo build --release --locked --bin fme
-mkdir -p "$OUT/results"
+mkdir -p "$OUT/results-$B"
 synth() { local out=$1; shift; [ -f "$out/seqinfo.ini" ] || "$FME" synth --out "$out" --force "$@" >/dev/null; }
-# Seeds 7021.. were not used to choose anything (7001-7012 were used to choose the depth smoothing
-# and sampling of estimated depth; see the README).
-synth "$OUT/single-s7021" --preset single --frames "$FRAMES" --seed 7021 --layout F --water 3C
-synth "$OUT/single-s7022" --preset single --frames "$FRAMES" --seed 7022 --layout F --water I
-synth "$OUT/swarm20-s7031" --preset swarm --fish 20 --frames "$FRAMES" --seed 7031 --layout F --water 3C
-synth "$OUT/swarm40-s7032" --preset swarm --fish 40 --frames "$FRAMES" --seed 7032 --layout F --water 1C
-synth "$OUT/swarm60-s7033" --preset swarm --fish 60 --frames "$FRAMES" --seed 7033 --layout F --water 5C
-for seq in single-s7021 single-s7022 swarm20-s7031 swarm40-s7032 swarm60-s7033; do
+# Seeds 7001-7012 were used to choose the depth smoothing and sampling of estimated depth (README).
+synth "$OUT/single-s$B" --preset single --frames "$FRAMES" --seed "$B" --layout F --water 3C
+synth "$OUT/single-s$((B + 1))" --preset single --frames "$FRAMES" --seed "$((B + 1))" --layout F --water I
+synth "$OUT/swarm20-s$((B + 10))" --preset swarm --fish 20 --frames "$FRAMES" --seed "$((B + 10))" --layout F --water 3C
+synth "$OUT/swarm40-s$((B + 11))" --preset swarm --fish 40 --frames "$FRAMES" --seed "$((B + 11))" --layout F --water 1C
+synth "$OUT/swarm60-s$((B + 12))" --preset swarm --fish 60 --frames "$FRAMES" --seed "$((B + 12))" --layout F --water 5C
+for seq in "single-s$B" "single-s$((B + 1))" "swarm20-s$((B + 10))" "swarm40-s$((B + 11))" "swarm60-s$((B + 12))"; do
   for g in A B C D; do
     case $g in
       A) args=(--boxes gt --depth gt) ;;
@@ -28,10 +30,10 @@ for seq in single-s7021 single-s7022 swarm20-s7031 swarm40-s7032 swarm60-s7033; 
       C) args=(--boxes model --depth gt) ;;
       D) args=(--boxes model --depth model --fit robust) ;;
     esac
-    "$FME" eval --json --sequence "$OUT/$seq" "${args[@]}" --plot "$OUT/$seq-$g.png" 2>/dev/null > "$OUT/results/$seq-$g.json"
+    "$FME" eval --json --sequence "$OUT/$seq" "${args[@]}" --plot "$OUT/$seq-$g.png" 2>/dev/null > "$OUT/results-$B/$seq-$g.json"
   done
 done
-python3 - "$OUT/results" <<'PY'
+python3 - "$OUT/results-$B" <<'PY'
 import json, os, sys
 d = sys.argv[1]
 print(f"{'sequence':15} {'group':6} {'RMSE m/s':>9} {'DistCorr':>8} {'bias':>7} {'true':>6} {'est':>6} {'fish':>5} "

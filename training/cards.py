@@ -74,6 +74,14 @@ frames (any Ultralytics-layout model can replace this one via `[detector] model`
 """
 
 
+def stopped_at(m):
+    """", stopped by the time budget in epoch N" when the training log says so."""
+    for line in (m.get("log") or {}).get("depth", []):
+        if "schedule finished" in line and "in epoch" in line:
+            return f" (the time budget stopped it in epoch {line.rsplit(' ', 1)[-1]})"
+    return ""
+
+
 def depth_card(m):
     d = m["depth"]
     rows = []
@@ -98,10 +106,12 @@ Files: `fish_depth_fp32.onnx` and `fish_depth_int8.onnx` (static int8, QDQ, {d.g
 U-Net-style encoder/decoder with 3x3-conv ReLU blocks (strides 2 to 32), output at half the input
 resolution, softplus. Trained with MiDaS' scale- and shift-invariant loss (median / mean absolute
 deviation normalisation, 20% trimmed L1, multi-scale gradient matching) on disparity 1/z from the
-generator's depth maps. Code: `training/depth.py`.
+generator's depth maps, plus a focus term (untrimmed L1 on the normalised maps over the fish box
+cores and the reference cubes, the only pixels fme reads; weight {d.get('focus_weight', 0)}). Code: `training/depth.py`.
 
 ## Data and training
-Same sequences as the detector (see fish_det.md). `bash training/train.sh`; {d['epochs']} epochs requested;
+Same sequences as the detector (see fish_det.md). `bash training/train.sh` (`SKIP=det` for this
+model alone); {d['epochs']} epochs requested{stopped_at(m)};
 training time {d['train_seconds']:.0f} s on this shared 2-core CPU.
 
 ## Quality on the held-out sequences (layout of each sequence, A to F)

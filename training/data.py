@@ -13,7 +13,9 @@ import numpy as np
 # Network input (letterbox of 640x384 without padding). FME_NET=WxH overrides it for one training run
 # (train.sh trains the detector and the depth network in separate runs, each at its own size).
 NET_W, NET_H = (int(v) for v in os.environ.get("FME_NET", "320x192").split("x"))
-DEPTH_OUT_W, DEPTH_OUT_H = NET_W // 2, NET_H // 2  # depth network output (half the input)
+# Depth network output: half the input, or the input size with FME_DEPTH_OUT=full.
+_OUT_DIV = 1 if os.environ.get("FME_DEPTH_OUT", "half") == "full" else 2
+DEPTH_OUT_W, DEPTH_OUT_H = NET_W // _OUT_DIV, NET_H // _OUT_DIV
 
 
 def list_sequences(root):
@@ -90,6 +92,7 @@ def load_sequence(seq, every=1, with_depth=True):
             depths.append(cv2.resize(d, (DEPTH_OUT_W, DEPTH_OUT_H), interpolation=cv2.INTER_NEAREST))
     out = {
         "images": np.stack(imgs),
+        "refs": reference_footprints(meta, gain, padx, pady),
         "boxes": boxes,
         "meta": meta,
         "frames": ids,
@@ -97,6 +100,23 @@ def load_sequence(seq, every=1, with_depth=True):
     }
     if with_depth:
         out["depth"] = np.stack(depths)
+    return out
+
+
+def reference_footprints(meta, gain, padx, pady):
+    """The reference cubes' front-face centres and half-sizes, (u, v, radius) in network input
+    pixels (the camera is fixed, so one list serves every frame of a sequence)."""
+    cam = meta["camera"]
+    rot = np.array(cam["world_to_camera"]["rotation"])
+    tr = np.array(cam["world_to_camera"]["translation"])
+    out = []
+    for ro in meta.get("reference_objects", []):
+        pc = rot @ np.array(ro["front_face_center_w"]) + tr
+        if pc[2] <= 0.05:
+            continue
+        u = cam["fx"] * pc[0] / pc[2] + cam["cx"]
+        v = cam["fy"] * pc[1] / pc[2] + cam["cy"]
+        out.append((u * gain + padx, v * gain + pady, 0.5 * ro["size_m"] * cam["fx"] / pc[2] * gain))
     return out
 
 

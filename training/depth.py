@@ -5,6 +5,11 @@ Trained with MiDaS' scale- and shift-invariant loss (Ranftl et al., TPAMI 2020, 
 disparity 1/z and prediction are each normalised by their median and mean absolute deviation over
 valid pixels, then compared with L1 (the 20% largest residuals trimmed), plus a multi-scale
 gradient-matching term on the normalised maps.
+
+fme reads the map only at fish and at the reference cubes (the metric fit, paper eq. 1-2), and both
+are small: the trimmed L1 throws their large residuals away as outliers and the background's pixels
+outnumber them. So a focus term adds the untrimmed L1 over the fish box cores and the cubes'
+footprints (`focus_masks`), weight FOCUS_WEIGHT.
 """
 import math
 import time
@@ -21,8 +26,13 @@ STD = np.array([0.229, 0.224, 0.225], np.float32)
 
 
 class FishDepth(nn.Module):
-    def __init__(self, w=(16, 32, 48, 64, 96)):
+    """`full=True` adds one decoder stage at the input resolution (skip from the image itself), so
+    the output is [B, H, W] rather than [B, H/2, W/2]: fish a few pixels wide keep their own depth
+    instead of blending into the water behind them."""
+
+    def __init__(self, w=(16, 32, 48, 64, 96), full=False):
         super().__init__()
+        self.full = full
         self.e2 = conv(3, w[0], 2)
         self.e4 = nn.Sequential(conv(w[0], w[1], 2), Block(w[1]))
         self.e8 = nn.Sequential(conv(w[1], w[2], 2), Block(w[2]))
@@ -32,6 +42,8 @@ class FishDepth(nn.Module):
         self.d8 = conv(w[3] + w[2], w[2])
         self.d4 = conv(w[2] + w[1], w[1])
         self.d2 = conv(w[1] + w[0], w[0])
+        if full:
+            self.d1 = conv(w[0] + 3, w[0])
         self.out = nn.Conv2d(w[0], 1, 3, 1, 1)
 
     def forward(self, x):
@@ -45,7 +57,9 @@ class FishDepth(nn.Module):
         y = self.d8(torch.cat([up(y), f8], 1))
         y = self.d4(torch.cat([up(y), f4], 1))
         y = self.d2(torch.cat([up(y), f2], 1))
-        return F.softplus(self.out(y))[:, 0]  # [B, H/2, W/2], positive
+        if self.full:
+            y = self.d1(torch.cat([up(y), x], 1))
+        return F.softplus(self.out(y))[:, 0]  # [B, H/2, W/2] (or [B, H, W] with full), positive
 
 
 def normalise(x, m):
@@ -62,11 +76,18 @@ def normalise(x, m):
     return torch.stack(out)
 
 
-def ssi_loss(pred, disp, mask, trim=0.2, alpha=0.5):
+FOCUS_WEIGHT = 3.0
+
+
+def ssi_loss(pred, disp, mask, trim=0.2, alpha=0.5, focus=None):
     pn = normalise(pred, mask)
     tn = normalise(disp, mask)
     res = (pn - tn).abs()
     loss = 0.0
+    if focus is not None:
+        fm = focus & mask
+        if fm.any():
+            loss = FOCUS_WEIGHT * res[fm].mean()
     for r, m in zip(res, mask):
         v = r[m]
         if v.numel() < 10:
@@ -92,10 +113,32 @@ def to_input(img_u8):
     return ((img_u8.astype(np.float32) / 255.0 - MEAN) / STD).transpose(2, 0, 1)
 
 
-def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budget_s=None):
+def focus_masks(boxes, refs, out_hw, net_hw, core=0.5):
+    """Per frame, a bool map at the network's output size: the central `core` fraction of each
+    fish box (network input pixels) and a disc around each reference cube's front face (u, v,
+    radius in input pixels)."""
+    oh, ow = out_hw
+    k = oh / net_hw[0]
+    out = np.zeros((len(boxes), oh, ow), bool)
+    for i, (b, r) in enumerate(zip(boxes, refs)):
+        for x, y, w, h, _vis in b:
+            cx, cy = (x + w / 2) * k, (y + h / 2) * k
+            hw, hh = max(w * k * core / 2, 0.5), max(h * k * core / 2, 0.5)
+            x0, x1 = int(max(np.floor(cx - hw), 0)), int(min(np.ceil(cx + hw), ow))
+            y0, y1 = int(max(np.floor(cy - hh), 0)), int(min(np.ceil(cy + hh), oh))
+            out[i, y0:y1, x0:x1] = True
+        for u, v, rad in r:
+            rr = max(rad * k, 0.5)
+            x0, x1 = int(max(np.floor(u * k - rr), 0)), int(min(np.ceil(u * k + rr), ow))
+            y0, y1 = int(max(np.floor(v * k - rr), 0)), int(min(np.ceil(v * k + rr), oh))
+            out[i, y0:y1, x0:x1] = True
+    return out
+
+
+def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budget_s=None, focus=None):
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    model = FishDepth()
+    model = FishDepth(full=depth.shape[1] == images.shape[1])
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     n = len(images)
     steps = epochs * math.ceil(n / batch)
@@ -108,11 +151,13 @@ def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budg
         tot = 0.0
         for i in range(0, n, batch):
             idx = perm[i:i + batch]
-            xs, ds = [], []
+            xs, ds, fs = [], [], []
             for j in idx:
                 im, d = images[j], depth[j]
+                f = focus[j] if focus is not None else np.zeros(d.shape, bool)
                 if rng.random() < 0.5:
-                    im, d = im[:, ::-1], d[:, ::-1]
+                    im, d, f = im[:, ::-1], d[:, ::-1], f[:, ::-1]
+                fs.append(np.ascontiguousarray(f))
                 im = np.clip(im.astype(np.float32) * rng.uniform(0.85, 1.15) + rng.uniform(-10, 10), 0, 255)
                 xs.append(to_input(im))
                 ds.append(np.ascontiguousarray(d))
@@ -120,7 +165,8 @@ def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budg
             z = torch.from_numpy(np.stack(ds))
             mask = z > 0.05
             disp = torch.where(mask, 1.0 / z.clamp(min=0.05), torch.zeros_like(z))
-            loss = ssi_loss(model(x), disp, mask)
+            fm = torch.from_numpy(np.stack(fs)) if focus is not None else None
+            loss = ssi_loss(model(x), disp, mask, focus=fm)
             opt.zero_grad()
             loss.backward()
             opt.step()

@@ -4,22 +4,23 @@
 # 1. builds `fme` (needs the `fme synth` generator) and renders training and held-out swarm
 #    sequences: many seeds, every water type I..7C, layouts A..F, 20-60 fish;
 # 2. trains the detector (input DET_NET, default 480x288) and the depth network (DEPTH_NET, default
-#    320x192) on the CPU (torch, fixed seeds), exports ONNX,
+#    480x288) on the CPU (torch, fixed seeds), exports ONNX,
 #    quantises to int8 (QDQ, calibrated on generator frames), measures fp32 vs int8;
 # 3. writes models/*.onnx and training/metrics.json; model cards are in models/*.md.
 # Environment: VENV (default /tmp/venv-infer, created from requirements.txt when missing),
 # FME_BIN (an fme binary with `synth`; default: cargo build --release), DATA (default
 # /tmp/fme-train-data), DET_EPOCHS, DEPTH_EPOCHS, BUDGET_S and DEPTH_BUDGET_S (seconds of training per model),
-# DET_NET, DEPTH_NET (WxH), TRAIN_SEQS (default 72), SKIP (det|depth), NICE (default 10).
+# DEPTH_FOCUS (weight of the depth loss's focus term on fish and cubes), DET_NET, DEPTH_NET (WxH), TRAIN_SEQS (default 72), SKIP (det|depth), NICE (default 10).
 set -euo pipefail
 HERE=$(cd "$(dirname "$0")" && pwd)
 ROOT=$(cd "$HERE/.." && pwd)
 VENV=${VENV:-/tmp/venv-infer}
 DATA=${DATA:-/tmp/fme-train-data}
 DET_EPOCHS=${DET_EPOCHS:-60}
-DEPTH_EPOCHS=${DEPTH_EPOCHS:-25}
+DEPTH_EPOCHS=${DEPTH_EPOCHS:-80}
+DEPTH_FOCUS=${DEPTH_FOCUS:-3.0}
 DET_NET=${DET_NET:-480x288}
-DEPTH_NET=${DEPTH_NET:-320x192}
+DEPTH_NET=${DEPTH_NET:-480x288}
 BUDGET_S=${BUDGET_S:-1800}
 DEPTH_BUDGET_S=${DEPTH_BUDGET_S:-$BUDGET_S}
 NICE=${NICE:-10}
@@ -62,5 +63,5 @@ if [ "${SKIP:-}" != det ]; then
 fi
 if [ "${SKIP:-}" != depth ]; then
   FME_NET=$DEPTH_NET nice -n "$NICE" "$VENV/bin/python" train.py --data "$DATA" --models "$ROOT/models" --skip det \
-    --depth-epochs "$DEPTH_EPOCHS" --depth-budget-s "$DEPTH_BUDGET_S" ${TRAIN_ARGS:-}
+    --depth-epochs "$DEPTH_EPOCHS" --depth-budget-s "$DEPTH_BUDGET_S" --depth-focus "$DEPTH_FOCUS" ${TRAIN_ARGS:-}
 fi

@@ -90,7 +90,7 @@ pub struct EvalArgs {
     /// `--boxes tracker|model`: tracker preset (`default` or `sort`).
     #[arg(long, default_value = "default")]
     pub tracker: String,
-    /// Time constant (s) of the per-track depth smoothing after eq. 4 (0 = off; default: 2 s with
+    /// Time constant (s) of the per-track depth smoothing after eq. 4 (0 = off; default: 1 s with
     /// `--depth model`, off otherwise).
     #[arg(long)]
     pub depth_smoothing: Option<f64>,

@@ -57,6 +57,7 @@ impl TrackFilter {
         self.prev_raw = None;
         self.depths.clear();
         self.jump_since = None;
+        self.smoothed = None;
     }
 
     /// The box-fluctuation detector (eq. 3) and its EWMA correction for the observation at `t`.
@@ -291,6 +292,9 @@ mod tests {
         // ... and the flicker is almost gone (raw: 0.4 m between consecutive frames).
         let step = out[251..300].windows(2).map(|w| (w[1] - w[0] - 0.3 * DT).abs()).fold(0.0, f64::max);
         assert!(step < 0.01, "frame-to-frame step {step}");
+        // A reset starts a fresh track: its first depth is not blended with the old track's.
+        f.reset();
+        assert_eq!(f.correct_depth(&cfg, Seconds(20.0), Some(Metres(5.0))).0, Some(Metres(5.0)));
         // Off by default: the raw value passes through.
         let mut g = TrackFilter::new();
         let off = PostprocessConfig { depth_jump: false, ..PostprocessConfig::default() };

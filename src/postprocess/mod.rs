@@ -40,9 +40,10 @@ pub enum BoxAnchor {
 }
 
 /// Depth smoothing for depth estimated by a network (`fme run`'s default, `fme eval --depth model`'s
-/// default). Measured on held-out swarms with GT boxes (README): 0 s -> 2 s cut the speed RMSE from
-/// 0.29-0.36 to 0.04-0.05 m/s; with ground-truth depth it only adds lag, so the library default is off.
-pub const ESTIMATED_DEPTH_SMOOTHING: Seconds = Seconds(2.0);
+/// default). Measured on held-out swarms (README): without it the network's flicker becomes speed
+/// (+0.09 to +0.20 m/s of bias); longer than 1 s it damps real depth motion (-0.03 to -0.05 m/s at
+/// 2 s with the bundled network); with ground-truth depth it only adds lag, so the library default is off.
+pub const ESTIMATED_DEPTH_SMOOTHING: Seconds = Seconds(1.0);
 
 /// Post-processing settings (the `[postprocess]` config section).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
