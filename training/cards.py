@@ -14,6 +14,7 @@ def ms(r):
 
 def det_card(m):
     d = m["detector"]
+    w, h = d.get("input", [320, 192])
     rows = []
     for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
         if tag not in d:
@@ -30,9 +31,9 @@ Files: `fish_det_fp32.onnx` and `fish_det_int8.onnx` (static int8, QDQ, {d.get('
 the faster int8 variant on this machine).
 
 ## Convention (same as an Ultralytics YOLOv8/YOLO11 detection export)
-- Input `images` float32 `[1, 3, {d.get('input', [320, 192])[1]}, {d.get('input', [320, 192])[0]}]`, RGB in 0..1, letterboxed (centred, pad 114/255).
-  640x384 frames scale by {d.get('input', [320, 192])[0] / 640:g} with no padding.
-- Output `output0` float32 `[1, 5, {d.get('input', [320, 192])[0] * d.get('input', [320, 192])[1] // 16}]`: cx, cy, w, h in input pixels, then the fish score
+- Input `images` float32 `[1, 3, {h}, {w}]`, RGB in 0..1, letterboxed (centred, pad 114/255).
+  640x384 frames scale by {w / 640:g} with no padding.
+- Output `output0` float32 `[1, 5, {w * h // 16}]`: cx, cy, w, h in input pixels, then the fish score
   (sigmoided; no objectness; no NMS in the graph). One column per stride-4 cell; only local maxima
   of the score map (3x3) have a non-zero score. fme decodes, runs NMS and un-letterboxes in Rust
   (`fme::infer::Detector`).
@@ -74,16 +75,11 @@ frames (any Ultralytics-layout model can replace this one via `[detector] model`
 """
 
 
-def stopped_at(m):
-    """", stopped by the time budget in epoch N" when the training log says so."""
-    for line in (m.get("log") or {}).get("depth", []):
-        if "schedule finished" in line and "in epoch" in line:
-            return f" (the time budget stopped it in epoch {line.rsplit(' ', 1)[-1]})"
-    return ""
-
-
 def depth_card(m):
     d = m["depth"]
+    w, h = d.get("input", [320, 192])
+    run = d.get("epochs_run", d["epochs"])
+    stopped = f" (the time budget stopped it in epoch {run})" if run < d["epochs"] else ""
     rows = []
     for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
         if tag not in d:
@@ -96,10 +92,10 @@ def depth_card(m):
 Files: `fish_depth_fp32.onnx` and `fish_depth_int8.onnx` (static int8, QDQ, {d.get('int8_kept', '?')} kept).
 
 ## Convention (MiDaS v2.1 small / Depth Anything V2)
-- Input `image` float32 `[1, 3, {d.get('input', [320, 192])[1]}, {d.get('input', [320, 192])[0]}]`: the frame resized to {d.get('input', [320, 192])[0]}x{d.get('input', [320, 192])[1]} (no aspect keep), RGB,
+- Input `image` float32 `[1, 3, {h}, {w}]`: the frame resized to {w}x{h} (no aspect keep), RGB,
   `(x/255 - mean) / std` with ImageNet mean (0.485, 0.456, 0.406) and std (0.229, 0.224, 0.225)
   (fme's `[depth]` defaults).
-- Output `depth` float32 `[1, {d.get('input', [320, 192])[1] // 2}, {d.get('input', [320, 192])[0] // 2}]`: relative inverse depth (larger = nearer, positive), known
+- Output `depth` float32 `[1, {h // 2}, {w // 2}]`: relative inverse depth (larger = nearer, positive), known
   only up to scale and shift; fme fits them to metres with the reference objects (paper eq. 1-2).
 
 ## Model
@@ -111,7 +107,7 @@ cores and the reference cubes, the only pixels fme reads; weight {d.get('focus_w
 
 ## Data and training
 Same sequences as the detector (see fish_det.md). `bash training/train.sh` (`SKIP=det` for this
-model alone); {d['epochs']} epochs requested{stopped_at(m)};
+model alone); {d['epochs']} epochs requested{stopped};
 training time {d['train_seconds']:.0f} s on this shared 2-core CPU.
 
 ## Quality on the held-out sequences (layout of each sequence, A to F)

@@ -13,9 +13,7 @@ import numpy as np
 # Network input (letterbox of 640x384 without padding). FME_NET=WxH overrides it for one training run
 # (train.sh trains the detector and the depth network in separate runs, each at its own size).
 NET_W, NET_H = (int(v) for v in os.environ.get("FME_NET", "320x192").split("x"))
-# Depth network output: half the input, or the input size with FME_DEPTH_OUT=full.
-_OUT_DIV = 1 if os.environ.get("FME_DEPTH_OUT", "half") == "full" else 2
-DEPTH_OUT_W, DEPTH_OUT_H = NET_W // _OUT_DIV, NET_H // _OUT_DIV
+DEPTH_OUT_W, DEPTH_OUT_H = NET_W // 2, NET_H // 2  # depth network output (half the input)
 
 
 def list_sequences(root):
@@ -103,9 +101,9 @@ def load_sequence(seq, every=1, with_depth=True):
     return out
 
 
-def reference_footprints(meta, gain, padx, pady):
-    """The reference cubes' front-face centres and half-sizes, (u, v, radius) in network input
-    pixels (the camera is fixed, so one list serves every frame of a sequence)."""
+def project_references(meta):
+    """Each reference cube in front of the camera (meta.json): its front-face centre in source
+    pixels, its camera depth z (m) and its half-size in pixels, as (u, v, z, half_px)."""
     cam = meta["camera"]
     rot = np.array(cam["world_to_camera"]["rotation"])
     tr = np.array(cam["world_to_camera"]["translation"])
@@ -116,8 +114,14 @@ def reference_footprints(meta, gain, padx, pady):
             continue
         u = cam["fx"] * pc[0] / pc[2] + cam["cx"]
         v = cam["fy"] * pc[1] / pc[2] + cam["cy"]
-        out.append((u * gain + padx, v * gain + pady, 0.5 * ro["size_m"] * cam["fx"] / pc[2] * gain))
+        out.append((u, v, pc[2], 0.5 * ro["size_m"] * cam["fx"] / pc[2]))
     return out
+
+
+def reference_footprints(meta, gain, padx, pady):
+    """The reference cubes' front-face centres and half-sizes, (u, v, radius) in network input
+    pixels (the camera is fixed, so one list serves every frame of a sequence)."""
+    return [(u * gain + padx, v * gain + pady, r * gain) for u, v, _z, r in project_references(meta)]
 
 
 def load_many(root, every=1, with_depth=True):

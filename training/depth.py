@@ -9,7 +9,7 @@ gradient-matching term on the normalised maps.
 fme reads the map only at fish and at the reference cubes (the metric fit, paper eq. 1-2), and both
 are small: the trimmed L1 throws their large residuals away as outliers and the background's pixels
 outnumber them. So a focus term adds the untrimmed L1 over the fish box cores and the cubes'
-footprints (`focus_masks`), weight FOCUS_WEIGHT.
+footprints (`focus_masks`), weight `focus_weight` (FOCUS_WEIGHT by default).
 """
 import math
 import time
@@ -26,13 +26,8 @@ STD = np.array([0.229, 0.224, 0.225], np.float32)
 
 
 class FishDepth(nn.Module):
-    """`full=True` adds one decoder stage at the input resolution (skip from the image itself), so
-    the output is [B, H, W] rather than [B, H/2, W/2]: fish a few pixels wide keep their own depth
-    instead of blending into the water behind them."""
-
-    def __init__(self, w=(16, 32, 48, 64, 96), full=False):
+    def __init__(self, w=(16, 32, 48, 64, 96)):
         super().__init__()
-        self.full = full
         self.e2 = conv(3, w[0], 2)
         self.e4 = nn.Sequential(conv(w[0], w[1], 2), Block(w[1]))
         self.e8 = nn.Sequential(conv(w[1], w[2], 2), Block(w[2]))
@@ -42,8 +37,6 @@ class FishDepth(nn.Module):
         self.d8 = conv(w[3] + w[2], w[2])
         self.d4 = conv(w[2] + w[1], w[1])
         self.d2 = conv(w[1] + w[0], w[0])
-        if full:
-            self.d1 = conv(w[0] + 3, w[0])
         self.out = nn.Conv2d(w[0], 1, 3, 1, 1)
 
     def forward(self, x):
@@ -57,9 +50,7 @@ class FishDepth(nn.Module):
         y = self.d8(torch.cat([up(y), f8], 1))
         y = self.d4(torch.cat([up(y), f4], 1))
         y = self.d2(torch.cat([up(y), f2], 1))
-        if self.full:
-            y = self.d1(torch.cat([up(y), x], 1))
-        return F.softplus(self.out(y))[:, 0]  # [B, H/2, W/2] (or [B, H, W] with full), positive
+        return F.softplus(self.out(y))[:, 0]  # [B, H/2, W/2], positive
 
 
 def normalise(x, m):
@@ -79,7 +70,7 @@ def normalise(x, m):
 FOCUS_WEIGHT = 3.0
 
 
-def ssi_loss(pred, disp, mask, trim=0.2, alpha=0.5, focus=None):
+def ssi_loss(pred, disp, mask, trim=0.2, alpha=0.5, focus=None, focus_weight=FOCUS_WEIGHT):
     pn = normalise(pred, mask)
     tn = normalise(disp, mask)
     res = (pn - tn).abs()
@@ -87,7 +78,7 @@ def ssi_loss(pred, disp, mask, trim=0.2, alpha=0.5, focus=None):
     if focus is not None:
         fm = focus & mask
         if fm.any():
-            loss = FOCUS_WEIGHT * res[fm].mean()
+            loss = focus_weight * res[fm].mean()
     for r, m in zip(res, mask):
         v = r[m]
         if v.numel() < 10:
@@ -120,32 +111,35 @@ def focus_masks(boxes, refs, out_hw, net_hw, core=0.5):
     oh, ow = out_hw
     k = oh / net_hw[0]
     out = np.zeros((len(boxes), oh, ow), bool)
-    for i, (b, r) in enumerate(zip(boxes, refs)):
+
+    def fill(m, cx, cy, hw, hh):  # centre and half-sizes in output pixels, at least one pixel
+        hw, hh = max(hw, 0.5), max(hh, 0.5)
+        m[int(max(np.floor(cy - hh), 0)):int(min(np.ceil(cy + hh), oh)),
+          int(max(np.floor(cx - hw), 0)):int(min(np.ceil(cx + hw), ow))] = True
+
+    for m, b, r in zip(out, boxes, refs):
         for x, y, w, h, _vis in b:
-            cx, cy = (x + w / 2) * k, (y + h / 2) * k
-            hw, hh = max(w * k * core / 2, 0.5), max(h * k * core / 2, 0.5)
-            x0, x1 = int(max(np.floor(cx - hw), 0)), int(min(np.ceil(cx + hw), ow))
-            y0, y1 = int(max(np.floor(cy - hh), 0)), int(min(np.ceil(cy + hh), oh))
-            out[i, y0:y1, x0:x1] = True
+            fill(m, (x + w / 2) * k, (y + h / 2) * k, w * k * core / 2, h * k * core / 2)
         for u, v, rad in r:
-            rr = max(rad * k, 0.5)
-            x0, x1 = int(max(np.floor(u * k - rr), 0)), int(min(np.ceil(u * k + rr), ow))
-            y0, y1 = int(max(np.floor(v * k - rr), 0)), int(min(np.ceil(v * k + rr), oh))
-            out[i, y0:y1, x0:x1] = True
+            fill(m, u * k, v * k, rad * k, rad * k)
     return out
 
 
-def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budget_s=None, focus=None):
+def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budget_s=None, focus=None,
+          focus_weight=FOCUS_WEIGHT):
+    """Returns the trained model and the number of epochs run (the time budget may stop it early)."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    model = FishDepth(full=depth.shape[1] == images.shape[1])
+    model = FishDepth()
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     n = len(images)
     steps = epochs * math.ceil(n / batch)
     t0 = time.time()
     step = 0
     frac = lr_at(opt, lr, 0.0, 0.0, time_budget_s)
+    epochs_run = 0
     for ep in range(epochs):
+        epochs_run = ep + 1
         model.train()
         perm = rng.permutation(n)
         tot = 0.0
@@ -154,10 +148,11 @@ def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budg
             xs, ds, fs = [], [], []
             for j in idx:
                 im, d = images[j], depth[j]
-                f = focus[j] if focus is not None else np.zeros(d.shape, bool)
-                if rng.random() < 0.5:
-                    im, d, f = im[:, ::-1], d[:, ::-1], f[:, ::-1]
-                fs.append(np.ascontiguousarray(f))
+                flip = rng.random() < 0.5
+                if flip:
+                    im, d = im[:, ::-1], d[:, ::-1]
+                if focus is not None:
+                    fs.append(np.ascontiguousarray(focus[j][:, ::-1] if flip else focus[j]))
                 im = np.clip(im.astype(np.float32) * rng.uniform(0.85, 1.15) + rng.uniform(-10, 10), 0, 255)
                 xs.append(to_input(im))
                 ds.append(np.ascontiguousarray(d))
@@ -166,7 +161,7 @@ def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budg
             mask = z > 0.05
             disp = torch.where(mask, 1.0 / z.clamp(min=0.05), torch.zeros_like(z))
             fm = torch.from_numpy(np.stack(fs)) if focus is not None else None
-            loss = ssi_loss(model(x), disp, mask, focus=fm)
+            loss = ssi_loss(model(x), disp, mask, focus=fm, focus_weight=focus_weight)
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -180,7 +175,7 @@ def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budg
             log(f"depth: schedule finished (time budget {time_budget_s} s or steps) in epoch {ep + 1}")
             break
     model.eval()
-    return model
+    return model, epochs_run
 
 
 def export(model, path, h, w):

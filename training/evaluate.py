@@ -152,12 +152,7 @@ def eval_depth(sess, seq_paths, every=5):
         t = np.array(cam["world_to_camera"]["translation"])
         sw, sh = s["src_size"]
         world = world_rows(seq)
-        refs = []
-        for ro in meta.get("reference_objects", []):
-            pc = R @ np.array(ro["front_face_center_w"]) + t
-            if pc[2] <= 0.05:
-                continue
-            refs.append((cam["fx"] * pc[0] / pc[2] + cam["cx"], cam["fy"] * pc[1] / pc[2] + cam["cy"], pc[2]))
+        refs = [(u, v, z) for u, v, z, _r in data.project_references(meta)]
         for img, fr in zip(s["images"], s["frames"]):
             x = data_input(img)
             m = sess.run(None, {name: x})[0]

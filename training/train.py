@@ -99,20 +99,20 @@ def main():
 
     if "depth" not in skip:
         t1 = time.time()
-        depth.FOCUS_WEIGHT = args.depth_focus
         focus = None
         if args.depth_focus > 0:
             tr_refs = [s["refs"] for s in tr_seqs for _ in s["frames"]]
             focus = depth.focus_masks(tr_boxes, tr_refs, tr_depth.shape[1:], (data.NET_H, data.NET_W))
             log(f"depth: focus term weight {args.depth_focus} on {focus.mean() * 100:.1f}% of the pixels")
-        model = depth.train(tr_images, tr_depth, args.depth_epochs, log=log,
-                            time_budget_s=args.depth_budget_s or args.budget_s, focus=focus)
+        model, epochs_run = depth.train(tr_images, tr_depth, args.depth_epochs, log=log,
+                                        time_budget_s=args.depth_budget_s or args.budget_s, focus=focus,
+                                        focus_weight=args.depth_focus)
         train_s = time.time() - t1
         fp32 = os.path.join(args.models, "fish_depth_fp32.onnx")
         depth.export(model, fp32, data.NET_H, data.NET_W)
         calib = [depth.to_input(tr_images[i]) for i in calib_idx]
-        res = {"train_seconds": round(train_s, 1), "epochs": args.depth_epochs, "input": [data.NET_W, data.NET_H],
-               "focus_weight": args.depth_focus}
+        res = {"train_seconds": round(train_s, 1), "epochs": args.depth_epochs, "epochs_run": epochs_run,
+               "input": [data.NET_W, data.NET_H], "focus_weight": args.depth_focus}
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             quant.quantize(fp32, os.path.join(args.models, f"fish_depth_int8_{tag}.onnx"), calib, "image", act)
         for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
