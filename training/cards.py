@@ -12,8 +12,20 @@ def ms(r):
     return f"{r[0]:.2f} (p90 {r[1]:.2f})"
 
 
+def data_of(m, d):
+    """The data a model was trained on: its own section, else the shared one (older metrics)."""
+    return d.get("data") or m["data"]
+
+
+def budget_note(d):
+    run = d.get("epochs_run", d["epochs"])
+    return f" (the time budget stopped it in epoch {run})" if run < d["epochs"] else ""
+
+
 def det_card(m):
     d = m["detector"]
+    data = data_of(m, d)
+    stopped = budget_note(d)
     w, h = d.get("input", [320, 192])
     rows = []
     for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
@@ -45,13 +57,13 @@ box decode and peak extraction inside the graph. {d.get('params_m', 1.10)} M par
 
 ## Data
 Rendered with `fme synth --preset swarm` (20 to 60 fish, water types I, II, III, 1C, 3C, 5C, 7C,
-layouts A to F, 640x384): training seeds {m['data'].get('train_seeds')} ({m['data']['train_frames']} frames from
-{len(m['data']['train_sequences'])} sequences); held-out seeds {m['data'].get('val_seeds')} ({m['data']['val_frames']} frames from
-{len(m['data']['val_sequences'])} sequences), never trained on. Augmentation: horizontal flip, brightness/contrast.
+layouts A to F, 640x384): training seeds {data.get('train_seeds')} ({data['train_frames']} frames from
+{len(data['train_sequences'])} sequences); held-out seeds {data.get('val_seeds')} ({data['val_frames']} frames from
+{len(data['val_sequences'])} sequences), never trained on. Augmentation: horizontal flip, brightness/contrast.
 
 ## Training
 `bash training/train.sh` (or `make -C training all`): CPU, torch {m.get('torch', '2.15.0')}, AdamW, one-cycle LR,
-batch 16, {d['epochs']} epochs requested, fixed seeds. Training time on this 2-core machine (shared):
+batch 16, {d['epochs']} epochs requested{stopped}, fixed seeds. Training time on this 2-core machine (shared):
 {d['train_seconds']:.0f} s.
 
 ## Quality on the held-out sequences
@@ -77,9 +89,9 @@ frames (any Ultralytics-layout model can replace this one via `[detector] model`
 
 def depth_card(m):
     d = m["depth"]
+    data = data_of(m, d)
     w, h = d.get("input", [320, 192])
-    run = d.get("epochs_run", d["epochs"])
-    stopped = f" (the time budget stopped it in epoch {run})" if run < d["epochs"] else ""
+    stopped = budget_note(d)
     rows = []
     for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
         if tag not in d:
@@ -106,7 +118,8 @@ generator's depth maps, plus a focus term (untrimmed L1 on the normalised maps o
 cores and the reference cubes, the only pixels fme reads; weight {d.get('focus_weight', 0)}). Code: `training/depth.py`.
 
 ## Data and training
-Same sequences as the detector (see fish_det.md). `bash training/train.sh` (`SKIP=det` for this
+Rendered like the detector's (see fish_det.md): training seeds {data.get('train_seeds')} ({data['train_frames']} frames
+from {len(data['train_sequences'])} sequences), held-out seeds {data.get('val_seeds')}. `bash training/train.sh` (`SKIP=det` for this
 model alone); {d['epochs']} epochs requested{stopped};
 training time {d['train_seconds']:.0f} s on this shared 2-core CPU.
 

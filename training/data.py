@@ -95,6 +95,7 @@ def load_sequence(seq, every=1, with_depth=True):
         "meta": meta,
         "frames": ids,
         "src_size": (w, h),
+        "path": seq,
     }
     if with_depth:
         out["depth"] = np.stack(depths)
@@ -124,8 +125,10 @@ def reference_footprints(meta, gain, padx, pady):
     return [(u * gain + padx, v * gain + pady, r * gain) for u, v, _z, r in project_references(meta)]
 
 
-def load_many(root, every=1, with_depth=True):
-    seqs = [load_sequence(s, every, with_depth) for s in list_sequences(root)]
+def load_many(root, every=1, with_depth=True, limit=0):
+    """Every sequence under root (the first `limit` in seed order when limit > 0)."""
+    paths = list_sequences(root)
+    seqs = [load_sequence(s, every, with_depth) for s in (paths[:limit] if limit > 0 else paths)]
     images = np.concatenate([s["images"] for s in seqs])
     boxes = [b for s in seqs for b in s["boxes"]]
     depth = np.concatenate([s["depth"] for s in seqs]) if with_depth else None

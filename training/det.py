@@ -150,7 +150,9 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
     t0 = time.time()
     step = 0
     frac = lr_at(opt, lr, 0.0, 0.0, time_budget_s)
+    epochs_run = 0
     for ep in range(epochs):
+        epochs_run = ep + 1
         model.train()
         perm = rng.permutation(n)
         tot = 0.0
@@ -181,7 +183,7 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
             log(f"det: schedule finished (time budget {time_budget_s} s or steps) in epoch {ep + 1}")
             break
     model.eval()
-    return model
+    return model, epochs_run
 
 
 def export(model, path, h, w):

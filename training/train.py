@@ -36,6 +36,8 @@ def main():
     ap.add_argument("--depth-budget-s", type=float, default=None, help="depth training budget (default: --budget-s)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--every", type=int, default=3, help="use every n-th training frame")
+    ap.add_argument("--train-seqs", type=int, default=0,
+                    help="train on the first N training sequences in seed order (0: all of them)")
     ap.add_argument("--depth-focus", type=float, default=depth.FOCUS_WEIGHT,
                     help="weight of the depth loss's focus term on fish and reference cubes (0: off)")
     ap.add_argument("--metrics", default=os.path.join(HERE, "metrics.json"))
@@ -53,29 +55,32 @@ def main():
         log_lines.append(msg)
 
     t0 = time.time()
-    tr_images, tr_boxes, tr_depth, tr_seqs = data.load_many(os.path.join(args.data, "train"), every=args.every)
+    tr_images, tr_boxes, tr_depth, tr_seqs = data.load_many(os.path.join(args.data, "train"), every=args.every,
+                                                               limit=args.train_seqs)
     va_paths = data.list_sequences(os.path.join(args.data, "val"))
     va_images, va_boxes, _, _ = data.load_many(os.path.join(args.data, "val"), every=5, with_depth=False)
     log(f"data: {len(tr_images)} training frames from {len(tr_seqs)} sequences, {len(va_images)} held-out frames "
         f"from {len(va_paths)} sequences ({time.time() - t0:.0f} s)")
-    metrics["data"] = {
-        "train_sequences": [os.path.basename(s) for s in data.list_sequences(os.path.join(args.data, "train"))],
+    data_info = {
+        "train_sequences": [os.path.basename(s["path"]) for s in tr_seqs],
         "val_sequences": [os.path.basename(s) for s in va_paths],
         "train_frames": int(len(tr_images)),
         "val_frames": int(len(va_images)),
-        "train_seeds": seeds_of(os.path.join(args.data, "train")),
-        "val_seeds": seeds_of(os.path.join(args.data, "val")),
+        "train_seeds": seeds_of(s["path"] for s in tr_seqs),
+        "val_seeds": seeds_of(va_paths),
     }
     calib_idx = np.random.default_rng(1).choice(len(tr_images), size=min(64, len(tr_images)), replace=False)
 
     if "det" not in skip:
         t1 = time.time()
-        model = det.train(tr_images, tr_boxes, args.det_epochs, log=log, time_budget_s=args.budget_s)
+        model, epochs_run = det.train(tr_images, tr_boxes, args.det_epochs, log=log, time_budget_s=args.budget_s)
         train_s = time.time() - t1
         fp32 = os.path.join(args.models, "fish_det_fp32.onnx")
         det.export(model, fp32, data.NET_H, data.NET_W)
         calib = [tr_images[i].astype(np.float32).transpose(2, 0, 1) / 255.0 for i in calib_idx]
-        res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs, "input": [data.NET_W, data.NET_H],
+        res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs, "epochs_run": epochs_run,
+               "input": [data.NET_W, data.NET_H],
+               "data": data_info,
                "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             out = os.path.join(args.models, f"fish_det_int8_{tag}.onnx")
@@ -112,6 +117,7 @@ def main():
         depth.export(model, fp32, data.NET_H, data.NET_W)
         calib = [depth.to_input(tr_images[i]) for i in calib_idx]
         res = {"train_seconds": round(train_s, 1), "epochs": args.depth_epochs, "epochs_run": epochs_run,
+               "data": data_info,
                "input": [data.NET_W, data.NET_H], "focus_weight": args.depth_focus}
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             quant.quantize(fp32, os.path.join(args.models, f"fish_depth_int8_{tag}.onnx"), calib, "image", act)
@@ -144,8 +150,8 @@ def main():
         cards.main_with(metrics)
 
 
-def seeds_of(root):
-    seeds = sorted(int(json.load(open(os.path.join(s, "meta.json"))).get("seed", -1)) for s in data.list_sequences(root))
+def seeds_of(paths):
+    seeds = sorted(int(json.load(open(os.path.join(s, "meta.json"))).get("seed", -1)) for s in paths)
     return f"{seeds[0]}..{seeds[-1]}" if seeds else "none"
 
 
