@@ -260,6 +260,27 @@ fn cli_json_series_and_plot() {
     assert_eq!((png.width(), png.height()), (1200, 560));
 }
 
+#[test]
+fn a_reader_that_closes_the_pipe_early_is_not_an_error() {
+    // `fme eval ... | head -1`: the report meets a closed pipe; eval must not panic (println! did).
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("seq");
+    write_sequence(&dir);
+    for json in [false, true] {
+        let mut cmd = fme();
+        cmd.args(["eval", "--sequence"]).arg(&dir);
+        if json {
+            cmd.arg("--json");
+        }
+        let mut child = cmd.stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped()).spawn().unwrap();
+        drop(child.stdout.take()); // the reader is gone before eval writes anything
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "json {json}: {:?}: {err}", out.status);
+        assert!(!err.contains("panicked"), "json {json}: {err}");
+    }
+}
+
 fn fails_with(args: &[&str], dir: &Path, needles: &[&str]) {
     let out = fme().args(["eval", "--sequence"]).arg(dir).args(args).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);

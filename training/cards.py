@@ -52,8 +52,9 @@ the faster int8 variant on this machine).
 
 ## Model
 Plain 3x3-conv ReLU backbone (strides 2 to 32, residual blocks), top-down FPN to one stride-4
-CenterNet-style head (centre heatmap with focal loss, sub-cell offset and log size with L1),
-box decode and peak extraction inside the graph. {d.get('params_m', 1.10)} M parameters. Code: `training/det.py`.
+CenterNet-style head (centre heatmap with focal loss; sub-cell offset and log size with L1 and GIoU
+on every cell where a fish's heat-map Gaussian is >= 0.4, as TTFNet), box decode and peak extraction
+inside the graph. {d.get('params_m', 1.10)} M parameters. Code: `training/det.py`.
 
 ## Data
 Rendered with `fme synth --preset swarm` (20 to 60 fish, water types I, II, III, 1C, 3C, 5C, 7C,

@@ -99,27 +99,29 @@ pub struct EvalArgs {
     pub tracker_config: Option<PathBuf>,
 }
 
-fn print_table(r: &EvalReport) {
+/// The human-readable report, one line per measure.
+fn table(r: &EvalReport) -> String {
+    let mut lines: Vec<String> = Vec::new();
     let opt = |v: Option<f64>, p: usize| v.map_or("-".to_string(), |x| format!("{x:.p$}"));
-    println!("sequence          {}", r.sequence);
-    println!(
+    lines.push(format!("sequence          {}", r.sequence));
+    lines.push(format!(
         "input             boxes {}, depth {:?}{}, post-processing {}",
         r.boxes,
         r.depth,
         r.fit.map_or(String::new(), |f| format!(", fit {f:?}")),
         if r.postprocess { "on" } else { "off" }
-    );
-    println!("frames scored     {} (mean {:.1} fish)", r.frames, r.mean_fish);
-    println!("                  {:>10} {:>10}", "fme", "no-postp");
-    println!("speed RMSE m/s    {:>10.4} {:>10.4}", r.speed_rmse_mps, r.speed_rmse_raw_mps);
-    println!("DistCorr          {:>10.4} {:>10.4}", r.speed_distcorr, r.speed_distcorr_raw);
-    println!(
+    ));
+    lines.push(format!("frames scored     {} (mean {:.1} fish)", r.frames, r.mean_fish));
+    lines.push(format!("                  {:>10} {:>10}", "fme", "no-postp"));
+    lines.push(format!("speed RMSE m/s    {:>10.4} {:>10.4}", r.speed_rmse_mps, r.speed_rmse_raw_mps));
+    lines.push(format!("DistCorr          {:>10.4} {:>10.4}", r.speed_distcorr, r.speed_distcorr_raw));
+    lines.push(format!(
         "error 95% m/s     [{:.4}, {:.4}]  bias {:.4}",
         r.error_ci95_mps[0], r.error_ci95_mps[1], r.speed_bias_mps
-    );
-    println!("mean speed m/s    true {:.4}  estimated {:.4}", r.mean_true_mps, r.mean_est_mps);
+    ));
+    lines.push(format!("mean speed m/s    true {:.4}  estimated {:.4}", r.mean_true_mps, r.mean_est_mps));
     if r.depth_rmse_m.is_some() {
-        println!(
+        lines.push(format!(
             "depth at fish     RMSE {} m  d<1.25 {}  d<1.25^2 {}  fit residual {} m, {} failed fits, {} refs visible, {} rejections",
             opt(r.depth_rmse_m, 3),
             opt(r.depth_delta_1_25, 3),
@@ -128,17 +130,17 @@ fn print_table(r: &EvalReport) {
             r.fit_failures,
             r.references_visible,
             r.references_rejected
-        );
+        ));
     }
-    println!("corrections       {} boxes (eq. 3), {} depths (eq. 4)", r.boxes_corrected, r.depths_corrected);
+    lines.push(format!("corrections       {} boxes (eq. 3), {} depths (eq. 4)", r.boxes_corrected, r.depths_corrected));
     if let Some(d) = &r.detection {
-        println!(
+        lines.push(format!(
             "detection         precision {:.3}  recall {:.3}  (IoU 0.5; {} TP, {} FP, {} FN)",
             d.precision, d.recall, d.tp, d.fp, d.fn_
-        );
+        ));
     }
     if let Some(m) = &r.mot {
-        println!(
+        lines.push(format!(
             "tracking          IDF1 {:.2}%  MOTA {:.2}%  MOTP {:.3}  HOTA {:.2}%  {} ID switches, {} FP, {} misses",
             100.0 * m.idf1,
             100.0 * m.mota,
@@ -147,8 +149,10 @@ fn print_table(r: &EvalReport) {
             m.id_switches,
             m.false_positives,
             m.misses
-        );
+        ));
     }
+    lines.push(String::new());
+    lines.join("\n")
 }
 
 /// Runs `fme eval`.
@@ -218,10 +222,8 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if let Some(p) = &args.plot {
         plot::plot_series(p, &report)?;
     }
-    if args.json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
-        print_table(&report);
-    }
+    // A closed pipe (`fme eval ... | head`) is not an error (`write_stdout`).
+    let text = if args.json { format!("{}\n", serde_json::to_string(&report)?) } else { table(&report) };
+    super::write_stdout(&text)?;
     Ok(())
 }

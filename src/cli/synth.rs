@@ -75,13 +75,12 @@ pub fn run(args: SynthArgs) -> anyhow::Result<()> {
         r => r.with_context(|| format!("fme synth could not write {}", args.out.display()))?,
     };
     let secs = started.elapsed().as_secs_f64();
-    println!(
-        "wrote {} sequence(s), {} frames to {} in {:.1} s ({:.1} frames/s)",
+    super::write_stdout(&format!(
+        "wrote {} sequence(s), {} frames to {} in {:.1} s ({:.1} frames/s)\n",
         summary.sequences.len(),
         summary.frames,
         summary.out.display(),
         secs,
         summary.frames as f64 / secs.max(1e-9)
-    );
-    Ok(())
+    ))
 }

@@ -117,15 +117,6 @@ pub fn metrics_line(m: &MotMetrics) -> String {
     )
 }
 
-/// Writes to stdout; a closed pipe (`fme ... | head`) is not an error, other failures are.
-pub fn write_stdout(text: &str) -> anyhow::Result<()> {
-    let mut out = std::io::stdout().lock();
-    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
-        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(anyhow::Error::new(e).context("writing to stdout")),
-        _ => Ok(()),
-    }
-}
-
 /// Runs `fme track`.
 pub fn run(args: TrackArgs) -> anyhow::Result<()> {
     if !(args.fps > 0.0 && args.fps.is_finite()) {
@@ -152,7 +143,7 @@ pub fn run(args: TrackArgs) -> anyhow::Result<()> {
             for r in &rows {
                 io::write_row(&mut text, r.frame, r.id as u32, &r.bbox, r.score)?;
             }
-            write_stdout(&String::from_utf8_lossy(&text))?;
+            super::write_stdout(&String::from_utf8_lossy(&text))?;
         }
         rows
     };
@@ -164,7 +155,7 @@ pub fn run(args: TrackArgs) -> anyhow::Result<()> {
         } else {
             format!("{METRICS_HEADER}\n{}\n", metrics_line(&m))
         };
-        write_stdout(&text)?;
+        super::write_stdout(&text)?;
     }
     Ok(())
 }

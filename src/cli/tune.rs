@@ -224,6 +224,6 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
     for (k, v) in &results[0].0 {
         writeln!(rep, "{k} = {v}")?;
     }
-    crate::cli::track::write_stdout(&rep)?;
+    super::write_stdout(&rep)?;
     Ok(())
 }
