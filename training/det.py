@@ -117,7 +117,8 @@ def targets(boxes, gh, gw, min_vis, spread=True):
         cells[iy - wy0, ix - wx0] = True
         fish.append((bw * bh, cx, cy, bw, bh, ix, iy, win, xs[cells], ys[cells], g[cells]))
     # Larger fish first, so a smaller fish in front owns the cells they share; centre cells last,
-    # so every fish keeps its own centre sample.
+    # so every fish keeps its own centre sample. Weights are not renormalised after that, so in crowds
+    # a large fish's samples sum to less than 1 (as in TTFNet).
     fish.sort(key=lambda f: -f[0])
     for _a, cx, cy, bw, bh, _ix, _iy, _win, cxs, cys, cg in fish:
         reg[0, cys, cxs] = cx - cxs - 0.5
