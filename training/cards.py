@@ -12,11 +12,6 @@ def ms(r):
     return f"{r[0]:.2f} (p90 {r[1]:.2f})"
 
 
-def data_of(m, d):
-    """The data a model was trained on: its own section, else the shared one (older metrics)."""
-    return d.get("data") or m["data"]
-
-
 def budget_note(d):
     run = d.get("epochs_run", d["epochs"])
     return f" (the time budget stopped it in epoch {run})" if run < d["epochs"] else ""
@@ -24,7 +19,7 @@ def budget_note(d):
 
 def det_card(m):
     d = m["detector"]
-    data = data_of(m, d)
+    data = d["data"]
     stopped = budget_note(d)
     w, h = d.get("input", [320, 192])
     rows = []
@@ -90,7 +85,7 @@ frames (any Ultralytics-layout model can replace this one via `[detector] model`
 
 def depth_card(m):
     d = m["depth"]
-    data = data_of(m, d)
+    data = d["data"]
     w, h = d.get("input", [320, 192])
     stopped = budget_note(d)
     rows = []

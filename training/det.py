@@ -110,23 +110,23 @@ def targets(boxes, gh, gw, min_vis, spread=True):
         wx0, wx1, wy0, wy1 = max(ix - rx, 0), min(ix + rx + 1, gw), max(iy - ry, 0), min(iy + ry + 1, gh)
         ys, xs = np.mgrid[wy0:wy1, wx0:wx1]
         g = np.exp(-((xs - ix) ** 2) / (2 * sx * sx) - ((ys - iy) ** 2) / (2 * sy * sy)).astype(np.float32)
-        win = (slice(wy0, wy1), slice(wx0, wx1))
-        np.maximum(heat[win], g, out=heat[win])
+        heat_win = heat[wy0:wy1, wx0:wx1]
+        np.maximum(heat_win, g, out=heat_win)
         heat[iy, ix] = 1.0
         cells = (g >= REG_GAUSS_MIN) if spread else np.zeros(g.shape, bool)
         cells[iy - wy0, ix - wx0] = True
-        fish.append((bw * bh, cx, cy, bw, bh, ix, iy, win, xs[cells], ys[cells], g[cells]))
+        fish.append((bw * bh, cx, cy, bw, bh, ix, iy, xs[cells], ys[cells], g[cells]))
     # Larger fish first, so a smaller fish in front owns the cells they share; centre cells last,
     # so every fish keeps its own centre sample. Weights are not renormalised after that, so in crowds
     # a large fish's samples sum to less than 1 (as in TTFNet).
     fish.sort(key=lambda f: -f[0])
-    for _a, cx, cy, bw, bh, _ix, _iy, _win, cxs, cys, cg in fish:
+    for _a, cx, cy, bw, bh, _ix, _iy, cxs, cys, cg in fish:
         reg[0, cys, cxs] = cx - cxs - 0.5
         reg[1, cys, cxs] = cy - cys - 0.5
         reg[2, cys, cxs] = math.log(bw)
         reg[3, cys, cxs] = math.log(bh)
         weight[cys, cxs] = cg / cg.sum()
-    for _a, cx, cy, bw, bh, ix, iy, _win, _cxs, _cys, cg in fish:
+    for _a, cx, cy, bw, bh, ix, iy, _cxs, _cys, cg in fish:
         reg[:, iy, ix] = (cx - ix - 0.5, cy - iy - 0.5, math.log(bw), math.log(bh))
         weight[iy, ix] = 1.0 / cg.sum()
     return heat, reg, weight
