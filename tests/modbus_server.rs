@@ -9,6 +9,7 @@ use fme::config::{ModbusMode, WordOrder};
 use fme::output::bank::RegisterBank;
 use fme::output::modbus;
 use fme::output::registers::{self, RegisterInputs, decode_f32, status};
+use fme::output::tcp_conns::TcpLimits;
 use fme::service::{Daemon, RunOptions};
 use std::sync::Arc;
 use std::time::Duration;
@@ -31,9 +32,16 @@ fn sample_bank() -> Arc<RegisterBank> {
 }
 
 async fn start_tcp(bank: Arc<RegisterBank>) -> (std::net::SocketAddr, tokio::sync::oneshot::Sender<()>) {
+    start_tcp_with(bank, TcpLimits::default()).await
+}
+
+async fn start_tcp_with(
+    bank: Arc<RegisterBank>,
+    limits: TcpLimits,
+) -> (std::net::SocketAddr, tokio::sync::oneshot::Sender<()>) {
     let (listener, addr) = modbus::bind_tcp("127.0.0.1:0").await.expect("bind");
     let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-    tokio::spawn(modbus::serve_tcp(listener, bank, async move {
+    tokio::spawn(modbus::serve_tcp(listener, bank, limits, async move {
         let _ = rx.await;
     }));
     (addr, tx)
@@ -106,6 +114,51 @@ async fn tcp_server_sees_new_blocks_and_many_clients() {
     let _ = stop.send(());
     tokio::time::sleep(Duration::from_millis(50)).await;
     assert!(tcp::connect_slave(addr, Slave(1)).await.is_err(), "server stopped listening");
+}
+
+/// One register read with a deadline: `Ok` only when the server answered with data.
+async fn read_ok(ctx: &mut tokio_modbus::client::Context) -> bool {
+    matches!(tokio::time::timeout(Duration::from_secs(2), ctx.read_input_registers(8, 1)).await, Ok(Ok(Ok(_))))
+}
+
+#[tokio::test]
+async fn tcp_server_closes_a_connection_idle_past_the_timeout_and_keeps_a_polling_one() {
+    let bank = sample_bank();
+    let limits = TcpLimits { max_connections: 8, idle_timeout: Some(Duration::from_millis(300)) };
+    let (addr, _stop) = start_tcp_with(bank.clone(), limits).await;
+    let mut polling = tcp::connect_slave(addr, Slave(1)).await.expect("connect polling");
+    let mut idle = tcp::connect_slave(addr, Slave(1)).await.expect("connect idle");
+    assert!(read_ok(&mut idle).await, "first read on the idle connection");
+    // 1.2 s of polling every 100 ms: four idle timeouts long, never idle for one.
+    for i in 0..12 {
+        assert!(read_ok(&mut polling).await, "poll {i} on a busy connection");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    assert!(!read_ok(&mut idle).await, "the connection idle for 1.2 s must have been closed");
+    let c = bank.counters();
+    assert_eq!((c.tcp_idle_closed, c.tcp_open), (1, 1), "{c:?}");
+    // The PLC simply reconnects.
+    let mut again = tcp::connect_slave(addr, Slave(1)).await.expect("reconnect");
+    assert!(read_ok(&mut again).await);
+}
+
+#[tokio::test]
+async fn tcp_server_at_its_connection_limit_closes_the_least_recently_active_for_a_new_one() {
+    let bank = sample_bank();
+    let limits = TcpLimits { max_connections: 2, idle_timeout: None };
+    let (addr, _stop) = start_tcp_with(bank.clone(), limits).await;
+    let mut a = tcp::connect_slave(addr, Slave(1)).await.expect("connect a");
+    let mut b = tcp::connect_slave(addr, Slave(1)).await.expect("connect b");
+    assert!(read_ok(&mut b).await);
+    tokio::time::sleep(Duration::from_millis(20)).await;
+    assert!(read_ok(&mut a).await, "a is now the most recently active");
+    // A rebooted PLC's new connection: served, and b (silent longest) makes room.
+    let mut c = tcp::connect_slave(addr, Slave(1)).await.expect("connect c beyond the limit");
+    assert!(read_ok(&mut c).await, "the new connection is served, not refused");
+    assert!(!read_ok(&mut b).await, "b, the least recently active, was closed");
+    assert!(read_ok(&mut a).await, "a stays open");
+    let n = bank.counters();
+    assert_eq!((n.tcp_evicted, n.tcp_open), (1, 2), "{n:?}");
 }
 
 #[tokio::test]

@@ -180,6 +180,9 @@ impl Config {
         if m.reconnect_min_ms == 0 || m.reconnect_min_ms > m.reconnect_max_ms {
             return err("output.modbus.reconnect_min_ms", "must be > 0 and <= output.modbus.reconnect_max_ms");
         }
+        if m.max_connections == 0 || m.max_connections > 64 {
+            return err("output.modbus.max_connections", format!("must be 1..=64, got {}", m.max_connections));
+        }
         if self.output.serial.enabled && self.output.serial.baud == 0 {
             return err("output.serial.baud", "must be > 0");
         }
@@ -343,6 +346,19 @@ mod tests {
         }
         let e = parse("[output]\nrate_hz = -1.0\n").err();
         assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.rate_hz"));
+    }
+
+    #[test]
+    fn tcp_connection_limits_checked_and_converted() {
+        for bad in [0, 65] {
+            let e = parse(&format!("[output.modbus]\nmax_connections = {bad}\n")).err();
+            assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.modbus.max_connections"), "{bad}: {e:?}");
+        }
+        let c = parse("[output.modbus]\nmax_connections = 2\nidle_timeout_ms = 0\n").expect("valid");
+        let l = c.output.modbus.tcp_limits();
+        assert_eq!((l.max_connections, l.idle_timeout), (2, None), "0 ms = never close idle connections");
+        let l = Config::default().output.modbus.tcp_limits();
+        assert_eq!((l.max_connections, l.idle_timeout), (8, Some(std::time::Duration::from_secs(60))));
     }
 
     #[test]

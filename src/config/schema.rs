@@ -186,6 +186,21 @@ pub struct ModbusConfig {
     pub reconnect_min_ms: u64,
     /// Longest reconnect delay, ms.
     pub reconnect_max_ms: u64,
+    /// TCP server: connections served at once; one more closes the least recently active
+    /// (Modbus TCP implementation guide 4.2.1).
+    pub max_connections: u32,
+    /// TCP server: close a connection with no request for this long, ms (0 = never).
+    pub idle_timeout_ms: u64,
+}
+
+impl ModbusConfig {
+    /// The TCP server's connection limits.
+    pub fn tcp_limits(&self) -> crate::output::tcp_conns::TcpLimits {
+        crate::output::tcp_conns::TcpLimits {
+            max_connections: self.max_connections as usize,
+            idle_timeout: (self.idle_timeout_ms > 0).then(|| std::time::Duration::from_millis(self.idle_timeout_ms)),
+        }
+    }
 }
 
 impl Default for ModbusConfig {
@@ -204,6 +219,8 @@ impl Default for ModbusConfig {
             timeout_ms: 1000,
             reconnect_min_ms: 500,
             reconnect_max_ms: 30_000,
+            max_connections: 8,
+            idle_timeout_ms: 60_000,
         }
     }
 }

@@ -20,6 +20,10 @@ pub struct RegisterBank {
     client_link_ok: AtomicBool,
     client_writes: AtomicU64,
     client_failures: AtomicU64,
+    tcp_open: AtomicU64,
+    tcp_idle_closed: AtomicU64,
+    tcp_evicted: AtomicU64,
+    tcp_accept_errors: AtomicU64,
 }
 
 impl Default for RegisterBank {
@@ -39,6 +43,14 @@ pub struct ModbusCounters {
     pub client_writes: u64,
     /// Failed connects or writes (client roles).
     pub client_failures: u64,
+    /// TCP server: connections open now.
+    pub tcp_open: u64,
+    /// TCP server: connections closed after the idle timeout.
+    pub tcp_idle_closed: u64,
+    /// TCP server: connections closed to make room for a newer one (limit reached).
+    pub tcp_evicted: u64,
+    /// TCP server: failed accepts (each retried after a pause).
+    pub tcp_accept_errors: u64,
 }
 
 impl RegisterBank {
@@ -54,6 +66,10 @@ impl RegisterBank {
             client_link_ok: AtomicBool::new(false),
             client_writes: AtomicU64::new(0),
             client_failures: AtomicU64::new(0),
+            tcp_open: AtomicU64::new(0),
+            tcp_idle_closed: AtomicU64::new(0),
+            tcp_evicted: AtomicU64::new(0),
+            tcp_accept_errors: AtomicU64::new(0),
         }
     }
 
@@ -106,6 +122,22 @@ impl RegisterBank {
         }
     }
 
+    pub(crate) fn set_tcp_open(&self, n: usize) {
+        self.tcp_open.store(n as u64, Ordering::Relaxed);
+    }
+
+    pub(crate) fn note_tcp_idle_closed(&self) {
+        self.tcp_idle_closed.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub(crate) fn note_tcp_evicted(&self) {
+        self.tcp_evicted.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub(crate) fn note_tcp_accept_error(&self) {
+        self.tcp_accept_errors.fetch_add(1, Ordering::Relaxed);
+    }
+
     /// Server roles: whether a request was served within `window`.
     pub fn served_within(&self, window: Duration) -> bool {
         let last = self.last_request_ms.load(Ordering::Relaxed);
@@ -124,6 +156,10 @@ impl RegisterBank {
             exceptions: self.exceptions.load(Ordering::Relaxed),
             client_writes: self.client_writes.load(Ordering::Relaxed),
             client_failures: self.client_failures.load(Ordering::Relaxed),
+            tcp_open: self.tcp_open.load(Ordering::Relaxed),
+            tcp_idle_closed: self.tcp_idle_closed.load(Ordering::Relaxed),
+            tcp_evicted: self.tcp_evicted.load(Ordering::Relaxed),
+            tcp_accept_errors: self.tcp_accept_errors.load(Ordering::Relaxed),
         }
     }
 }

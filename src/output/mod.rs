@@ -8,3 +8,4 @@ pub mod feeding;
 pub mod modbus;
 pub mod registers;
 pub mod serial_line;
+pub mod tcp_conns;

@@ -1,12 +1,16 @@
 //! Modbus in all four roles (tokio-modbus): TCP server (default; the PLC polls), TCP client (one
 //! FC16 write of the block per update), RTU server and RTU client over a serial line.
 //!
+//! The TCP server limits its connections and closes idle ones ([`super::tcp_conns`]), and a failed
+//! accept pauses it instead of stopping it.
+//!
 //! Every client call has a timeout (tokio-modbus has none of its own, issue #113); a lost PLC is
 //! reconnected with exponential backoff (tokio-modbus does not reconnect, #219/#309); the pipeline
 //! only ever publishes into the [`RegisterBank`] and never waits on the PLC.
 
 use super::bank::RegisterBank;
 use super::registers::{BLOCK_LEN, HR_WRITABLE_LEN, HR_WRITABLE_START};
+use super::tcp_conns::{Connections, TcpLimits};
 use crate::capture::Backoff;
 use crate::config::{ModbusConfig, Parity};
 use std::future::Future;
@@ -137,21 +141,51 @@ pub async fn bind_tcp(listen: &str) -> Result<(tokio::net::TcpListener, SocketAd
     Ok((l, addr))
 }
 
-/// Serves Modbus TCP on `listener` until `shutdown` resolves.
+/// Serves Modbus TCP on `listener` until `shutdown` resolves, within `limits` (connection limit,
+/// idle timeout: [`super::tcp_conns`]).
+///
+/// A failed accept (the process out of file descriptors, say) never stops the server: it is
+/// counted, logged, and accepting resumes after a pause (backoff 0.1 s doubling to 5 s).
+/// tokio-modbus ends its accept loop on the first such error and closes the connections it serves,
+/// so those PLCs reconnect once it resumes.
 pub async fn serve_tcp(
     listener: tokio::net::TcpListener,
     bank: Arc<RegisterBank>,
+    limits: TcpLimits,
     shutdown: impl Future<Output = ()> + Send + Sync + 'static,
 ) {
+    let conns = Connections::new(limits, bank.clone());
     let server = tokio_modbus::server::tcp::Server::new(listener);
-    let new_service = move |_addr: SocketAddr| Ok(Some(RegisterService::new(bank.clone(), None)));
-    let on_connected = move |stream, addr| {
-        let new_service = new_service.clone();
-        async move { tokio_modbus::server::tcp::accept_tcp_connection(stream, addr, new_service) }
+    let service_bank = bank.clone();
+    let on_connected = move |stream: tokio::net::TcpStream, addr: SocketAddr| {
+        let transport = conns.admit(stream, addr);
+        let service = RegisterService::new(service_bank.clone(), None);
+        std::future::ready(Ok(Some((service, transport))))
     };
     let on_err = |e: std::io::Error| tracing::debug!("modbus tcp connection ended: {e}");
-    if let Err(e) = server.serve_until(&on_connected, on_err, shutdown).await {
-        tracing::error!("modbus tcp server stopped: {e}");
+    let mut shutdown = std::pin::pin!(shutdown);
+    let mut backoff = Backoff::new(Duration::from_millis(100), Duration::from_secs(5));
+    loop {
+        let started = tokio::time::Instant::now();
+        tokio::select! {
+            res = server.serve(&on_connected, on_err) => {
+                let e = match res {
+                    Ok(()) => std::io::Error::other("accept loop ended"),
+                    Err(e) => e,
+                };
+                if started.elapsed() >= Duration::from_secs(5) {
+                    backoff.reset();
+                }
+                let pause = backoff.next_delay();
+                bank.note_tcp_accept_error();
+                tracing::warn!("modbus tcp server: accept failed: {e}; accepting again in {:.1} s", pause.as_secs_f64());
+                tokio::select! {
+                    _ = tokio::time::sleep(pause) => {},
+                    () = &mut shutdown => return,
+                }
+            }
+            () = &mut shutdown => return,
+        }
     }
 }
 

@@ -398,9 +398,14 @@ impl Daemon {
                 modbus_addr = Some(addr);
                 let (tx, rx) = tokio::sync::oneshot::channel::<()>();
                 server_stops.push(tx);
-                server_tasks.push(tokio::spawn(modbus::serve_tcp(listener, bank.clone(), async move {
-                    let _ = rx.await;
-                })));
+                server_tasks.push(tokio::spawn(modbus::serve_tcp(
+                    listener,
+                    bank.clone(),
+                    m.tcp_limits(),
+                    async move {
+                        let _ = rx.await;
+                    },
+                )));
                 shared.log(Level::INFO, format!("modbus tcp server on {addr}"));
             }
             ModbusMode::RtuServer => {
