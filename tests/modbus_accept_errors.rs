@@ -9,8 +9,11 @@ use std::sync::Arc;
 use std::time::Duration;
 use tokio_modbus::prelude::*;
 
-fn open_fds() -> u64 {
-    std::fs::read_dir("/proc/self/fd").map(|d| d.count() as u64).unwrap_or(0)
+/// The lowest free descriptor number: with RLIMIT_NOFILE set to it, no new descriptor can be made.
+fn lowest_free_fd() -> u64 {
+    use std::os::fd::AsRawFd as _;
+    let probe = std::fs::File::open("/dev/null").expect("open /dev/null");
+    probe.as_raw_fd() as u64
 }
 
 fn set_nofile(soft: u64) -> libc::rlimit {
@@ -34,15 +37,14 @@ async fn tcp_server_keeps_accepting_after_running_out_of_file_descriptors() {
         let _ = rx.await;
     }));
 
-    // Room for a few more descriptors only; each local connection takes two (client and server).
-    let old = set_nofile(open_fds() + 6);
+    // Client sockets made first; then not one descriptor left, so the server's accept fails.
+    let sockets: Vec<_> = (0..4).map(|_| tokio::net::TcpSocket::new_v4().expect("socket")).collect();
+    let old = set_nofile(lowest_free_fd());
     let mut clients = Vec::new();
-    for _ in 0..16 {
-        match tokio::time::timeout(Duration::from_secs(1), tokio::net::TcpStream::connect(addr)).await {
-            Ok(Ok(s)) => clients.push(s),
-            _ => break,
+    for s in sockets {
+        if let Ok(Ok(c)) = tokio::time::timeout(Duration::from_secs(1), s.connect(addr)).await {
+            clients.push(c);
         }
-        tokio::time::sleep(Duration::from_millis(20)).await;
     }
     let deadline = tokio::time::Instant::now() + Duration::from_secs(5);
     while bank.counters().tcp_accept_errors == 0 && tokio::time::Instant::now() < deadline {

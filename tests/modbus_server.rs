@@ -9,7 +9,7 @@ use fme::config::{ModbusMode, WordOrder};
 use fme::output::bank::RegisterBank;
 use fme::output::modbus;
 use fme::output::registers::{self, RegisterInputs, decode_f32, status};
-use fme::output::tcp_conns::TcpLimits;
+use fme::output::tcp_conns::{Connections, TcpLimits};
 use fme::service::{Daemon, RunOptions};
 use std::sync::Arc;
 use std::time::Duration;
@@ -124,22 +124,43 @@ async fn read_ok(ctx: &mut tokio_modbus::client::Context) -> bool {
 #[tokio::test]
 async fn tcp_server_closes_a_connection_idle_past_the_timeout_and_keeps_a_polling_one() {
     let bank = sample_bank();
-    let limits = TcpLimits { max_connections: 8, idle_timeout: Some(Duration::from_millis(300)) };
+    let limits = TcpLimits { max_connections: 8, idle_timeout: Some(Duration::from_secs(1)) };
     let (addr, _stop) = start_tcp_with(bank.clone(), limits).await;
     let mut polling = tcp::connect_slave(addr, Slave(1)).await.expect("connect polling");
     let mut idle = tcp::connect_slave(addr, Slave(1)).await.expect("connect idle");
     assert!(read_ok(&mut idle).await, "first read on the idle connection");
-    // 1.2 s of polling every 100 ms: four idle timeouts long, never idle for one.
-    for i in 0..12 {
+    // 3 s of polling every 100 ms: three idle timeouts long, never idle for one.
+    for i in 0..30 {
         assert!(read_ok(&mut polling).await, "poll {i} on a busy connection");
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
-    assert!(!read_ok(&mut idle).await, "the connection idle for 1.2 s must have been closed");
+    assert!(!read_ok(&mut idle).await, "the connection idle for 3 s must have been closed");
     let c = bank.counters();
     assert_eq!((c.tcp_idle_closed, c.tcp_open), (1, 1), "{c:?}");
     // The PLC simply reconnects.
     let mut again = tcp::connect_slave(addr, Slave(1)).await.expect("reconnect");
     assert!(read_ok(&mut again).await);
+}
+
+#[tokio::test]
+async fn an_evicted_stream_keeps_failing_when_polled_again() {
+    use tokio::io::AsyncReadExt as _;
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
+    let addr = listener.local_addr().expect("addr");
+    let conns = Connections::new(TcpLimits { max_connections: 1, idle_timeout: None }, sample_bank());
+    let _ca = tokio::net::TcpStream::connect(addr).await.expect("connect a");
+    let (sa, peer_a) = listener.accept().await.expect("accept a");
+    let mut a = conns.admit(sa, peer_a);
+    let _cb = tokio::net::TcpStream::connect(addr).await.expect("connect b");
+    let (sb, peer_b) = listener.accept().await.expect("accept b");
+    let _b = conns.admit(sb, peer_b);
+    let mut buf = [0u8; 8];
+    for attempt in 0..3 {
+        let e = a.read(&mut buf).await.expect_err("evicted stream must fail");
+        assert_eq!(e.kind(), std::io::ErrorKind::ConnectionAborted, "attempt {attempt}: {e}");
+    }
+    drop(a);
+    assert_eq!(conns.open(), 1, "only b is registered");
 }
 
 #[tokio::test]

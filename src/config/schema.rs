@@ -189,7 +189,8 @@ pub struct ModbusConfig {
     /// TCP server: connections served at once; one more closes the least recently active
     /// (Modbus TCP implementation guide 4.2.1).
     pub max_connections: u32,
-    /// TCP server: close a connection with no request for this long, ms (0 = never).
+    /// TCP server: close a connection with no request for this long, ms (0 = never); keep it well
+    /// above the PLC's poll interval.
     pub idle_timeout_ms: u64,
 }
 

@@ -109,6 +109,7 @@ impl Connections {
             id,
             conns: self.clone(),
             close: Some(rx),
+            was_evicted: false,
             idle: self.limits.idle_timeout.map(|d| (d, Box::pin(tokio::time::sleep(d)))),
         }
     }
@@ -138,25 +139,33 @@ pub struct GuardedStream {
     id: u64,
     conns: Connections,
     close: Option<oneshot::Receiver<()>>,
+    was_evicted: bool,
     idle: Option<(Duration, Pin<Box<Sleep>>)>,
 }
 
 impl GuardedStream {
-    /// `Some(error)` once this connection was evicted for a newer one.
+    /// `Some(error)` once this connection was evicted for a newer one (and on every poll after).
     fn evicted(&mut self, cx: &mut Context<'_>) -> Option<io::Error> {
-        let rx = self.close.as_mut()?;
-        match Pin::new(rx).poll(cx) {
-            Poll::Ready(Ok(())) => Some(io::Error::new(
-                io::ErrorKind::ConnectionAborted,
-                format!("modbus tcp {}: closed to make room for a newer connection", self.peer),
-            )),
-            // The sender went away without a signal: nothing more to wait for.
-            Poll::Ready(Err(_)) => {
-                self.close = None;
-                None
+        if !self.was_evicted {
+            let rx = self.close.as_mut()?;
+            match Pin::new(rx).poll(cx) {
+                // A oneshot receiver must not be polled again once it has completed.
+                Poll::Ready(Ok(())) => {
+                    self.close = None;
+                    self.was_evicted = true;
+                }
+                // The sender went away without a signal: nothing more to wait for.
+                Poll::Ready(Err(_)) => {
+                    self.close = None;
+                    return None;
+                }
+                Poll::Pending => return None,
             }
-            Poll::Pending => None,
         }
+        Some(io::Error::new(
+            io::ErrorKind::ConnectionAborted,
+            format!("modbus tcp {}: closed to make room for a newer connection", self.peer),
+        ))
     }
 }
 
