@@ -12,6 +12,10 @@ def ms(r):
     return f"{r[0]:.2f} (p90 {r[1]:.2f})"
 
 
+def autocast_note(d):
+    return " bf16 autocast (oneDNN on AMX), channels-last," if d.get("autocast") == "bf16" else ""
+
+
 def budget_note(d):
     run = d.get("epochs_run", d["epochs"])
     return f" (the time budget stopped it in epoch {run})" if run < d["epochs"] else ""
@@ -58,7 +62,7 @@ layouts A to F, 640x384): training seeds {data.get('train_seeds')} ({data['train
 {len(data['val_sequences'])} sequences), never trained on. Augmentation: horizontal flip, brightness/contrast.
 
 ## Training
-`bash training/train.sh` (or `make -C training all`): CPU, torch {m.get('torch', '2.15.0')}, AdamW, one-cycle LR,
+`bash training/train.sh` (or `make -C training all`): CPU, torch {m.get('torch', '2.15.0')},{autocast_note(d)} AdamW, one-cycle LR,
 batch 16, {d['epochs']} epochs requested{stopped}, fixed seeds. Training time on this 2-core machine (shared):
 {d['train_seconds']:.0f} s.
 
@@ -117,7 +121,7 @@ cores and the reference cubes, the only pixels fme reads; weight {d.get('focus_w
 Rendered like the detector's (see fish_det.md): training seeds {data.get('train_seeds')} ({data['train_frames']} frames
 from {len(data['train_sequences'])} sequences), held-out seeds {data.get('val_seeds')}. `bash training/train.sh` (`SKIP=det` for this
 model alone); {d['epochs']} epochs requested{stopped};
-training time {d['train_seconds']:.0f} s on this shared 2-core CPU.
+training time {d['train_seconds']:.0f} s on this shared 2-core CPU{(',' + autocast_note(d)[:-1]) if autocast_note(d) else ''}.
 
 ## Quality on the held-out sequences (layout of each sequence, A to F)
 Per frame, scale and shift are fitted in disparity space to the reference cubes' front-face centres

@@ -19,7 +19,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from det import Block, conv, lr_at
+from det import Block, conv, lr_at, use_bf16
 
 MEAN = np.array([0.485, 0.456, 0.406], np.float32)
 STD = np.array([0.229, 0.224, 0.225], np.float32)
@@ -130,7 +130,9 @@ def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budg
     """Returns the trained model and the number of epochs run (the time budget may stop it early)."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    model = FishDepth()
+    model = FishDepth().to(memory_format=torch.channels_last)
+    bf16 = use_bf16()
+    log(f"depth: {'bf16 autocast' if bf16 else 'fp32'}, channels-last")
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     n = len(images)
     steps = epochs * math.ceil(n / batch)
@@ -156,12 +158,14 @@ def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budg
                 im = np.clip(im.astype(np.float32) * rng.uniform(0.85, 1.15) + rng.uniform(-10, 10), 0, 255)
                 xs.append(to_input(im))
                 ds.append(np.ascontiguousarray(d))
-            x = torch.from_numpy(np.stack(xs))
+            x = torch.from_numpy(np.stack(xs)).contiguous(memory_format=torch.channels_last)
             z = torch.from_numpy(np.stack(ds))
             mask = z > 0.05
             disp = torch.where(mask, 1.0 / z.clamp(min=0.05), torch.zeros_like(z))
             fm = torch.from_numpy(np.stack(fs)) if focus is not None else None
-            loss = ssi_loss(model(x), disp, mask, focus=fm, focus_weight=focus_weight)
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+                pred = model(x)
+            loss = ssi_loss(pred.float(), disp, mask, focus=fm, focus_weight=focus_weight)
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -179,6 +183,7 @@ def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budg
 
 
 def export(model, path, h, w):
+    model.to(memory_format=torch.contiguous_format)
     model.eval()
     torch.onnx.export(model, (torch.zeros(1, 3, h, w),), path, input_names=["image"], output_names=["depth"],
                       opset_version=17, dynamo=False)

@@ -8,6 +8,7 @@ per stride-4 cell (N = H/4 * W/4; non-peak cells score 0). fme's Rust decoder an
 like any YOLO11 export.
 """
 import math
+import os
 import time
 
 import numpy as np
@@ -187,11 +188,29 @@ def lr_at(opt, max_lr, step_frac, elapsed, budget):
     return frac
 
 
+def use_bf16():
+    """Whether training runs the network under bf16 autocast: on CPUs with native bf16 (AMX or
+    AVX512-BF16) oneDNN's bf16 convolutions with channels-last tensors made a training step of
+    16 frames 3.9x faster here (detector 946 -> 241 ms, depth network 1298 -> 336 ms); where bf16
+    would be emulated it is slower, so fp32. FME_BF16=0 or 1 overrides the check."""
+    env = os.environ.get("FME_BF16", "auto")
+    if env in ("0", "1"):
+        return env == "1"
+    try:
+        with open("/proc/cpuinfo") as f:
+            flags = set(f.read().split())
+    except OSError:
+        return False
+    return bool({"amx_bf16", "avx512_bf16"} & flags)
+
+
 def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=print, time_budget_s=None, spread=True,
           giou_weight=1.0):
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    model = FishDet()
+    model = FishDet().to(memory_format=torch.channels_last)
+    bf16 = use_bf16()
+    log(f"det: {'bf16 autocast' if bf16 else 'fp32'}, channels-last")
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     n = len(images)
     steps = epochs * math.ceil(n / batch)
@@ -215,9 +234,10 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
                 hs.append(h)
                 rs.append(r)
                 ms.append(m)
-            x = torch.from_numpy(np.stack(xs).astype(np.float32))
-            out = model(x)
-            loss = loss_fn(out, torch.from_numpy(np.stack(hs)), torch.from_numpy(np.stack(rs)),
+            x = torch.from_numpy(np.stack(xs).astype(np.float32)).contiguous(memory_format=torch.channels_last)
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+                out = model(x)
+            loss = loss_fn(out.float(), torch.from_numpy(np.stack(hs)), torch.from_numpy(np.stack(rs)),
                            torch.from_numpy(np.stack(ms)), giou_weight)
             opt.zero_grad()
             loss.backward()
@@ -236,6 +256,7 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
 
 
 def export(model, path, h, w):
+    model.to(memory_format=torch.contiguous_format)
     model.eval()
     model.export_decode = True
     torch.onnx.export(model, (torch.zeros(1, 3, h, w),), path, input_names=["images"], output_names=["output0"],

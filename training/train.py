@@ -80,6 +80,7 @@ def main():
         det.export(model, fp32, data.NET_H, data.NET_W)
         calib = [tr_images[i].astype(np.float32).transpose(2, 0, 1) / 255.0 for i in calib_idx]
         res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs, "epochs_run": epochs_run,
+               "autocast": "bf16" if det.use_bf16() else "fp32",
                "input": [data.NET_W, data.NET_H],
                "data": data_info,
                "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
@@ -118,6 +119,7 @@ def main():
         depth.export(model, fp32, data.NET_H, data.NET_W)
         calib = [depth.to_input(tr_images[i]) for i in calib_idx]
         res = {"train_seconds": round(train_s, 1), "epochs": args.depth_epochs, "epochs_run": epochs_run,
+               "autocast": "bf16" if det.use_bf16() else "fp32",
                "data": data_info,
                "input": [data.NET_W, data.NET_H], "focus_weight": args.depth_focus}
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
