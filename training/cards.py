@@ -13,7 +13,7 @@ def ms(r):
 
 
 def autocast_note(d):
-    return " bf16 autocast (oneDNN on AMX), channels-last," if d.get("autocast") == "bf16" else ""
+    return " bf16 autocast (oneDNN, native bf16), channels-last," if d.get("autocast") == "bf16" else ""
 
 
 def budget_note(d):
