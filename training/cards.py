@@ -13,7 +13,8 @@ def ms(r):
 
 
 def autocast_note(d):
-    return " bf16 autocast (oneDNN, native bf16), channels-last," if d.get("autocast") == "bf16" else ""
+    """Ends a sentence about training: how the network ran (fp32 unless recorded otherwise)."""
+    return ", under bf16 autocast with channels-last tensors (oneDNN, native bf16)" if d.get("autocast") == "bf16" else ""
 
 
 def budget_note(d):
@@ -62,9 +63,9 @@ layouts A to F, 640x384): training seeds {data.get('train_seeds')} ({data['train
 {len(data['val_sequences'])} sequences), never trained on. Augmentation: horizontal flip, brightness/contrast.
 
 ## Training
-`bash training/train.sh` (or `make -C training all`): CPU, torch {m.get('torch', '2.15.0')},{autocast_note(d)} AdamW, one-cycle LR,
+`bash training/train.sh` (or `make -C training all`): CPU, torch {m.get('torch', '2.15.0')}, AdamW, one-cycle LR,
 batch 16, {d['epochs']} epochs requested{stopped}, fixed seeds. Training time on this 2-core machine (shared):
-{d['train_seconds']:.0f} s.
+{d['train_seconds']:.0f} s{autocast_note(d)}.
 
 ## Quality on the held-out sequences
 Precision / recall at IoU 0.5 against the ground-truth boxes clipped to the frame; boxes with
@@ -121,7 +122,7 @@ cores and the reference cubes, the only pixels fme reads; weight {d.get('focus_w
 Rendered like the detector's (see fish_det.md): training seeds {data.get('train_seeds')} ({data['train_frames']} frames
 from {len(data['train_sequences'])} sequences), held-out seeds {data.get('val_seeds')}. `bash training/train.sh` (`SKIP=det` for this
 model alone); {d['epochs']} epochs requested{stopped};
-training time {d['train_seconds']:.0f} s on this shared 2-core CPU{(',' + autocast_note(d)[:-1]) if autocast_note(d) else ''}.
+training time {d['train_seconds']:.0f} s on this shared 2-core CPU{autocast_note(d)}.
 
 ## Quality on the held-out sequences (layout of each sequence, A to F)
 Per frame, scale and shift are fitted in disparity space to the reference cubes' front-face centres

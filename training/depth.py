@@ -19,7 +19,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from det import Block, conv, lr_at, use_bf16
+from det import Block, conv, lr_at, train_forward, use_bf16
 
 MEAN = np.array([0.485, 0.456, 0.406], np.float32)
 STD = np.array([0.229, 0.224, 0.225], np.float32)
@@ -158,14 +158,12 @@ def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budg
                 im = np.clip(im.astype(np.float32) * rng.uniform(0.85, 1.15) + rng.uniform(-10, 10), 0, 255)
                 xs.append(to_input(im))
                 ds.append(np.ascontiguousarray(d))
-            x = torch.from_numpy(np.stack(xs)).contiguous(memory_format=torch.channels_last)
+            x = torch.from_numpy(np.stack(xs))
             z = torch.from_numpy(np.stack(ds))
             mask = z > 0.05
             disp = torch.where(mask, 1.0 / z.clamp(min=0.05), torch.zeros_like(z))
             fm = torch.from_numpy(np.stack(fs)) if focus is not None else None
-            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-                pred = model(x)
-            loss = ssi_loss(pred.float(), disp, mask, focus=fm, focus_weight=focus_weight)
+            loss = ssi_loss(train_forward(model, x, bf16), disp, mask, focus=fm, focus_weight=focus_weight)
             opt.zero_grad()
             loss.backward()
             opt.step()

@@ -204,6 +204,13 @@ def use_bf16():
     return bool({"amx_bf16", "avx512_bf16"} & flags)
 
 
+def train_forward(model, x, bf16):
+    """One training forward pass of a channels-last model: channels-last input, bf16 autocast when
+    `bf16`, output in fp32 (the losses stay in fp32)."""
+    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+        return model(x.contiguous(memory_format=torch.channels_last)).float()
+
+
 def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=print, time_budget_s=None, spread=True,
           giou_weight=1.0):
     torch.manual_seed(seed)
@@ -234,10 +241,8 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
                 hs.append(h)
                 rs.append(r)
                 ms.append(m)
-            x = torch.from_numpy(np.stack(xs).astype(np.float32)).contiguous(memory_format=torch.channels_last)
-            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-                out = model(x)
-            loss = loss_fn(out.float(), torch.from_numpy(np.stack(hs)), torch.from_numpy(np.stack(rs)),
+            out = train_forward(model, torch.from_numpy(np.stack(xs).astype(np.float32)), bf16)
+            loss = loss_fn(out, torch.from_numpy(np.stack(hs)), torch.from_numpy(np.stack(rs)),
                            torch.from_numpy(np.stack(ms)), giou_weight)
             opt.zero_grad()
             loss.backward()

@@ -152,7 +152,7 @@ pub async fn serve_tcp(
     listener: tokio::net::TcpListener,
     bank: Arc<RegisterBank>,
     limits: TcpLimits,
-    shutdown: impl Future<Output = ()> + Send + Sync + 'static,
+    shutdown: impl Future<Output = ()> + Send + 'static,
 ) {
     let conns = Connections::new(limits, bank.clone());
     let server = tokio_modbus::server::tcp::Server::new(listener);

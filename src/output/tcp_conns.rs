@@ -41,7 +41,7 @@ struct Entry {
     id: u64,
     peer: SocketAddr,
     last_activity: Instant,
-    close: Option<oneshot::Sender<()>>,
+    close: oneshot::Sender<()>,
 }
 
 #[derive(Debug, Default)]
@@ -91,14 +91,12 @@ impl Connections {
                     e.peer,
                     now.duration_since(e.last_activity).as_secs_f64()
                 );
-                if let Some(close) = e.close {
-                    let _ = close.send(());
-                }
+                let _ = e.close.send(());
                 self.bank.note_tcp_evicted();
             }
             let id = t.next_id;
             t.next_id += 1;
-            t.open.push(Entry { id, peer, last_activity: now, close: Some(tx) });
+            t.open.push(Entry { id, peer, last_activity: now, close: tx });
             self.bank.set_tcp_open(t.open.len());
             id
         };
@@ -108,8 +106,7 @@ impl Connections {
             peer,
             id,
             conns: self.clone(),
-            close: Some(rx),
-            was_evicted: false,
+            eviction: Eviction::Watching(rx),
             idle: self.limits.idle_timeout.map(|d| (d, Box::pin(tokio::time::sleep(d)))),
         }
     }
@@ -130,6 +127,17 @@ impl Connections {
     }
 }
 
+/// Whether a connection has been evicted by [`Connections::admit`].
+#[derive(Debug)]
+enum Eviction {
+    /// Not yet; the table signals through this receiver.
+    Watching(oneshot::Receiver<()>),
+    /// Evicted: every read and write fails from now on.
+    Evicted,
+    /// Can no longer happen (the table dropped its sender).
+    Never,
+}
+
 /// A server-side TCP stream that ends with an error when it is idle for longer than the timeout or
 /// when [`Connections`] evicts it; dropping it unregisters the connection.
 #[derive(Debug)]
@@ -138,34 +146,28 @@ pub struct GuardedStream {
     peer: SocketAddr,
     id: u64,
     conns: Connections,
-    close: Option<oneshot::Receiver<()>>,
-    was_evicted: bool,
+    eviction: Eviction,
     idle: Option<(Duration, Pin<Box<Sleep>>)>,
 }
 
 impl GuardedStream {
     /// `Some(error)` once this connection was evicted for a newer one (and on every poll after).
     fn evicted(&mut self, cx: &mut Context<'_>) -> Option<io::Error> {
-        if !self.was_evicted {
-            let rx = self.close.as_mut()?;
+        if let Eviction::Watching(rx) = &mut self.eviction {
+            // A oneshot receiver must not be polled again once it has completed.
             match Pin::new(rx).poll(cx) {
-                // A oneshot receiver must not be polled again once it has completed.
-                Poll::Ready(Ok(())) => {
-                    self.close = None;
-                    self.was_evicted = true;
-                }
+                Poll::Ready(Ok(())) => self.eviction = Eviction::Evicted,
                 // The sender went away without a signal: nothing more to wait for.
-                Poll::Ready(Err(_)) => {
-                    self.close = None;
-                    return None;
-                }
-                Poll::Pending => return None,
+                Poll::Ready(Err(_)) => self.eviction = Eviction::Never,
+                Poll::Pending => {}
             }
         }
-        Some(io::Error::new(
-            io::ErrorKind::ConnectionAborted,
-            format!("modbus tcp {}: closed to make room for a newer connection", self.peer),
-        ))
+        matches!(self.eviction, Eviction::Evicted).then(|| {
+            io::Error::new(
+                io::ErrorKind::ConnectionAborted,
+                format!("modbus tcp {}: closed to make room for a newer connection", self.peer),
+            )
+        })
     }
 }
 
