@@ -212,6 +212,10 @@ fn relative_gt_with_inverse_and_robust_fits_gets_depth_right() {
     let exact = evaluate(&seq, &opts).unwrap();
     assert_eq!(exact.references_visible, 6);
     assert!(exact.depth_rmse_m.unwrap() < 0.01, "{}", summary(&exact));
+    // Ground-truth boxes carry world.csv's ids: depth is also scored against each body centre
+    // (the painted fish are flat at their centre depth, so the two agree).
+    assert!(exact.depth_body_rmse_m.unwrap() < 0.01, "{}", summary(&exact));
+    assert_eq!(exact.depth_body_delta_1_25, Some(1.0));
     assert_eq!(exact.depth_delta_1_25, Some(1.0));
     assert!(exact.fit_residual_m.unwrap() < 0.01);
     // Two fouled references: the plain inverse fit suffers, the robust one does not.
@@ -220,6 +224,7 @@ fn relative_gt_with_inverse_and_robust_fits_gets_depth_right() {
     opts.fit = FitChoice::Robust;
     let robust = evaluate(&seq, &opts).unwrap();
     assert!(fouled.depth_rmse_m.unwrap() > 0.1, "{}", summary(&fouled));
+    assert!(fouled.depth_body_rmse_m.unwrap() > 0.1, "{}", summary(&fouled));
     assert!(robust.depth_rmse_m.unwrap() < 0.01, "{}", summary(&robust));
     assert_eq!(robust.references_rejected, 2 * N as u64);
 }

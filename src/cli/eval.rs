@@ -47,8 +47,9 @@ pub struct EvalArgs {
     /// Turn the box-fluctuation detector (eq. 3) on (off by default: it raised the RMSE in our measurements).
     #[arg(long, conflicts_with = "no_box_fluctuation")]
     pub box_fluctuation: bool,
-    /// How a fish's depth is read: `centre` (5x5 median at the box centre, the paper) or `box`
-    /// (25% quantile over the central half of the box). Default: `box` with `--depth model`, else `centre`.
+    /// How a fish's depth is read: `centre` (5x5 median at the box centre, the paper), `box` (near
+    /// quarter of the central half of the box) or `visible` (as `box`, minus where other fish's boxes
+    /// cover it; no depth for a fish hidden that way). Default: `visible` with `--depth model`, else `centre`.
     #[arg(long, value_enum)]
     pub depth_sample: Option<DepthSample>,
     /// Speed from the chord over the span (the paper, with span 0) or a least-squares regression.
@@ -132,6 +133,13 @@ fn table(r: &EvalReport) -> String {
             r.references_rejected
         ));
     }
+    if r.depth_body_rmse_m.is_some() {
+        lines.push(format!(
+            "depth at body     RMSE {} m  d<1.25 {}  (against each fish's body centre, gt/world.csv)",
+            opt(r.depth_body_rmse_m, 3),
+            opt(r.depth_body_delta_1_25, 3)
+        ));
+    }
     lines.push(format!("corrections       {} boxes (eq. 3), {} depths (eq. 4)", r.boxes_corrected, r.depths_corrected));
     if let Some(d) = &r.detection {
         lines.push(format!(
@@ -181,7 +189,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         },
         foul_refs: args.foul_refs,
         depth_sample: args.depth_sample.unwrap_or(if args.depth == DepthChoice::Model {
-            DepthSample::Box
+            DepthSample::Visible
         } else {
             DepthSample::Centre
         }),

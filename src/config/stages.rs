@@ -78,7 +78,7 @@ impl Default for DepthConfig {
             rate_hz: 5.0,
             threads: 1,
             fit: crate::metric::FitMethod::Robust,
-            sample: crate::metric::DepthSample::Box,
+            sample: crate::metric::DepthSample::Visible,
             mean: crate::infer::Normalize::IMAGENET.mean,
             std: crate::infer::Normalize::IMAGENET.std,
         }

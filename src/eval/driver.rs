@@ -1,5 +1,7 @@
 //! The evaluation driver: run the estimator over a sequence and score it against ground truth.
 
+use std::collections::HashMap;
+
 use super::live::{self, DetectionScore};
 use super::metrics::{DepthAccuracy, bias, distance_correlation, quantile, rmse};
 use super::relative::{RelativeGtParams, relative_at, sample_relative};
@@ -9,8 +11,8 @@ use crate::infer::{self, DepthNet, Detector, RelDepthMap, RgbFrame, SessionOptio
 pub use crate::metric::DepthSample;
 use crate::metric::regressors::{Regressor, RegressorKind};
 use crate::metric::{
-    FitMethod, ROBUST_INLIER, ReferencePair, ReferencePoints, References, RelativeMap, ScaleShift, sample_box_quantile,
-    sample_median,
+    FitMethod, MIN_VISIBLE_POINTS, Overlaps, ROBUST_INLIER, ReferencePair, ReferencePoints, References, RelativeMap,
+    ScaleShift, sample_box_quantile, sample_box_quantile_visible, sample_median,
 };
 use crate::mot::MotMetrics;
 use crate::motion::{ActivityEstimator, MotionConfig, TrackObservation};
@@ -176,6 +178,14 @@ pub struct EvalReport {
     /// Same with 1.25^2.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_delta_1_25_2: Option<f64>,
+    /// With ground-truth boxes: depth RMSE against the camera z of each fish's body centre
+    /// (`gt/world.csv`), whatever `depth_sample` reads; a surface sample is nearer than the body
+    /// centre by about half the fish's thickness. Metres.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_body_rmse_m: Option<f64>,
+    /// Same pairs: fraction with max(est/true, true/est) < 1.25.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_body_delta_1_25: Option<f64>,
     /// Mean residual of the per-frame metric fits at the references, metres.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fit_residual_m: Option<f64>,
@@ -340,6 +350,13 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
     let mut obs: Vec<TrackObservation> = Vec::new();
     let mut gt_map = Vec::new();
     let mut depth_acc = DepthAccuracy::default();
+    let mut body_acc = DepthAccuracy::default();
+    // Camera z of each fish's body centre by (frame, id): ground-truth boxes carry world.csv's ids.
+    let body_z: HashMap<(u32, u32), f64> = if estimated && opts.boxes == BoxesChoice::Gt {
+        seq.world.iter().map(|r| ((r.frame, r.id), seq.camera.pose.to_camera(&r.position).depth().0)).collect()
+    } else {
+        HashMap::new()
+    };
     let mut last_fit: Option<Fitted> = None;
     let (mut fit_failures, mut rejected, mut residual_sum, mut residual_n) = (0usize, 0u64, 0.0, 0usize);
     let (mut boxes_corrected, mut depths_corrected) = (0u64, 0u64);
@@ -392,36 +409,55 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
                 Err(_) => fit_failures += 1,
             }
         }
+        obs.clear();
+        obs.extend(boxes.iter().map(|&(id, bbox)| TrackObservation { id, bbox, depth: None }));
+        // The other fish's boxes overlapping `o`'s box `b` (for `DepthSample::Visible`).
+        let overlaps = |o: &TrackObservation, b: &PixelBox| {
+            Overlaps::collect(b, obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox))
+        };
         let depth_at = |o: &TrackObservation, px: Pixel| -> Option<Metres> {
             let fitted = |r: f64| last_fit.as_ref()?.depth(r);
+            // Relative inverse depth of the network or of ground truth at one grid point.
+            let rel_at = |p| match map {
+                Some(m) => m.sample_with_radius(p, 0).map(f64::from),
+                None => relative_at(&opts.relative, &dm, frame, p),
+            };
+            let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
+            // Larger relative inverse depth is nearer: its 75% quantile is the near quarter, as
+            // ground truth's 25% quantile in metres.
             match (estimated, opts.depth_sample) {
                 (true, DepthSample::Centre) => fitted(rel(px)?),
                 (false, DepthSample::Centre) => sample_median(&gt, px, radius, |_| true).map(Metres),
-                (est, DepthSample::Box) => {
-                    let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
-                    if est {
-                        // Larger relative inverse depth is nearer: the 75% quantile of R.
-                        fitted(sample_box_quantile(&b, 0.5, 0.75, |p| match map {
-                            Some(m) => m.sample_with_radius(p, 0).map(f64::from),
-                            None => relative_at(&opts.relative, &dm, frame, p),
-                        })?)
-                    } else {
-                        sample_box_quantile(&b, 0.5, 0.25, |p| gt.at(p)).map(Metres)
-                    }
+                (true, DepthSample::Box) => fitted(sample_box_quantile(&b, 0.5, 0.75, rel_at)?),
+                (false, DepthSample::Box) => sample_box_quantile(&b, 0.5, 0.25, |p| gt.at(p)).map(Metres),
+                (true, DepthSample::Visible) => {
+                    let ov = overlaps(o, &b);
+                    fitted(sample_box_quantile_visible(&b, 0.5, 0.75, &ov, MIN_VISIBLE_POINTS, rel_at)?)
+                }
+                (false, DepthSample::Visible) => {
+                    let ov = overlaps(o, &b);
+                    sample_box_quantile_visible(&b, 0.5, 0.25, &ov, MIN_VISIBLE_POINTS, |p| gt.at(p)).map(Metres)
                 }
             }
         };
-        obs.clear();
-        obs.extend(boxes.iter().map(|&(id, bbox)| TrackObservation { id, bbox, depth: None }));
         if estimated {
             for o in &obs {
                 let c = o.bbox.center();
+                // Ground truth read the same way as the estimate (the same pixels).
                 let g = match opts.depth_sample {
                     DepthSample::Centre => sample_median(&gt, c, radius, |_| true),
                     DepthSample::Box => sample_box_quantile(&o.bbox, 0.5, 0.25, |p| gt.at(p)),
+                    DepthSample::Visible => {
+                        let ov = overlaps(o, &o.bbox);
+                        sample_box_quantile_visible(&o.bbox, 0.5, 0.25, &ov, MIN_VISIBLE_POINTS, |p| gt.at(p))
+                    }
                 };
-                if let (Some(e), Some(g)) = (depth_at(o, c), g) {
+                let e = depth_at(o, c);
+                if let (Some(e), Some(g)) = (e, g) {
                     depth_acc.add(e.0, g);
+                }
+                if let (Some(e), Some(&z)) = (e, body_z.get(&(frame, o.id))) {
+                    body_acc.add(e.0, z);
                 }
             }
         }
@@ -502,6 +538,8 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         depth_rmse_m: depth_acc.rmse(),
         depth_delta_1_25: depth_acc.delta_1_25(),
         depth_delta_1_25_2: depth_acc.delta_1_25_2(),
+        depth_body_rmse_m: body_acc.rmse(),
+        depth_body_delta_1_25: body_acc.delta_1_25(),
         fit_residual_m: (residual_n > 0).then(|| residual_sum / residual_n as f64),
         fit_failures,
         references_visible: ref_px.len(),

@@ -21,7 +21,10 @@ mod sample;
 
 pub use fit::{DepthModel, FitError, FitMethod, ROBUST_INLIER, ReferencePair, References, ScaleShift, fit, fit_robust};
 pub use references::{ReferenceFootprints, ReferencePoints};
-pub use sample::{DepthSample, MAX_RADIUS, RelativeMap, sample_box_quantile, sample_median};
+pub use sample::{
+    DepthSample, MAX_OVERLAPS, MAX_RADIUS, MIN_VISIBLE_POINTS, Overlaps, RelativeMap, sample_box_quantile,
+    sample_box_quantile_visible, sample_median,
+};
 
 /// Most reference objects a scene may have (the paper uses ten).
 pub const MAX_REFERENCES: usize = 32;

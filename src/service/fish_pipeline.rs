@@ -17,7 +17,8 @@ use crate::config::Config;
 use crate::geometry::{Camera, PixelBox};
 use crate::infer::{self, DepthNet, Detector, InferSchedule, RgbFrame, ScheduleConfig, SessionOptions};
 use crate::metric::{
-    DepthSample, FitMethod, ROBUST_INLIER, ReferenceFootprints, ReferencePoints, ScaleShift, sample_box_quantile,
+    DepthSample, FitMethod, MIN_VISIBLE_POINTS, Overlaps, ROBUST_INLIER, ReferenceFootprints, ReferencePoints,
+    ScaleShift, sample_box_quantile, sample_box_quantile_visible,
 };
 use crate::motion::{ActivityEstimator, TrackObservation};
 use crate::track::{self, Tracker};
@@ -301,14 +302,17 @@ impl Pipeline for FishPipeline {
         self.health.tracks = self.obs.len() as u32;
         self.health.detector_hz = self.det_rate.hz();
         self.health.depth_hz = self.depth_rate.hz();
-        let (fit, map, how) = (self.fit, self.depth.last_map(), self.depth_sample);
-        let s = self.estimator.update_with(t, &self.obs, |o, px| {
+        let (fit, map, how, obs) = (self.fit, self.depth.last_map(), self.depth_sample, &self.obs);
+        let s = self.estimator.update_with(t, obs, |o, px| {
             let (fit, map) = (fit?, map?);
+            let at = |p| map.sample_with_radius(p, 0).map(f64::from);
+            // Larger relative inverse depth is nearer: the 75% quantile of R is the near quarter.
             let r = match how {
-                DepthSample::Box => {
-                    // Larger relative inverse depth is nearer: the 75% quantile of R is the near quarter.
+                DepthSample::Box => sample_box_quantile(&PixelBox::from_center(px, o.bbox.w, o.bbox.h), 0.5, 0.75, at)?,
+                DepthSample::Visible => {
                     let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
-                    sample_box_quantile(&b, 0.5, 0.75, |p| map.sample_with_radius(p, 0).map(f64::from))?
+                    let ov = Overlaps::collect(&b, obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox));
+                    sample_box_quantile_visible(&b, 0.5, 0.75, &ov, MIN_VISIBLE_POINTS, at)?
                 }
                 DepthSample::Centre => f64::from(map.sample(px)?),
             };
