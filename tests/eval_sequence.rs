@@ -24,10 +24,23 @@ fn camera() -> Camera {
     Camera { intrinsics, pose }
 }
 
-/// Fish `i`'s body centre at time `t`: constant velocity, and its velocity.
+/// Fish `i`'s body centre at time `t`: constant velocity, and its velocity. Fish 3 (only in
+/// [`write_sequence_hidden`]) swims 1 m behind fish 0 (3 m deep against 2 m), 0.25 m to the right of
+/// its line of sight and 1.5 times as fast, so it stays in the same place relative to fish 0 in the
+/// image: fish 0's box covers about half of fish 3's box core all the time.
 fn fish(i: u32, t: f64) -> (WorldPoint, Vector3<f64>) {
-    let v = [Vector3::new(0.4, 0.0, 0.0), Vector3::new(-0.2, 0.3, 0.1), Vector3::new(0.1, -0.25, 0.0)][i as usize];
-    let p0 = [Vector3::new(2.0, 1.5, 1.4), Vector3::new(3.8, 0.8, 1.2), Vector3::new(3.0, 2.5, 1.8)][i as usize];
+    let v = [
+        Vector3::new(0.4, 0.0, 0.0),
+        Vector3::new(-0.2, 0.3, 0.1),
+        Vector3::new(0.1, -0.25, 0.0),
+        Vector3::new(0.6, 0.0, 0.0),
+    ][i as usize];
+    let p0 = [
+        Vector3::new(2.0, 1.5, 1.4),
+        Vector3::new(3.8, 0.8, 1.2),
+        Vector3::new(3.0, 2.5, 1.8),
+        Vector3::new(1.75, 2.5, 1.4),
+    ][i as usize];
     (WorldPoint(p0 + v * t), v)
 }
 
@@ -48,12 +61,17 @@ fn references() -> Vec<ReferenceObject> {
 /// Writes the sequence: background wall at 4.5 m depth, reference squares and fish boxes painted
 /// at their depths (fish as flat rectangles: the box centre's depth is the body's camera z).
 fn write_sequence(target: &Path) {
-    write_sequence_with(target, false)
+    write_sequence_with(target, false, 3)
+}
+
+/// The sequence plus fish 3, half hidden behind fish 0.
+fn write_sequence_hidden(target: &Path) {
+    write_sequence_with(target, false, 4)
 }
 
 /// `flick`: every fourth frame each fish's box grows by 40% to the right for one frame (a tail swing),
 /// the box-centre fluctuation eq. 3 exists for.
-fn write_sequence_with(target: &Path, flick: bool) {
+fn write_sequence_with(target: &Path, flick: bool, n_fish: u32) {
     let cam = camera();
     let stage = StagedDir::create(target, false).unwrap();
     let w = SequenceWriter::new(stage.path()).unwrap();
@@ -73,7 +91,7 @@ fn write_sequence_with(target: &Path, flick: bool) {
             }
         };
         // Paint far fish first so nearer ones cover them.
-        let mut fishes: Vec<(u32, WorldPoint, Vector3<f64>, f64)> = (0..3)
+        let mut fishes: Vec<(u32, WorldPoint, Vector3<f64>, f64)> = (0..n_fish)
             .map(|i| {
                 let (p, v) = fish(i, t);
                 (i, p, v, cam.pose.to_camera(&p).depth().0)
@@ -121,7 +139,7 @@ fn write_sequence_with(target: &Path, flick: bool) {
         reference_objects: refs,
         layout: Some("F".into()),
         pond_size_m: Some([6.0, 4.0, 3.0]),
-        fish: Some(3),
+        fish: Some(n_fish),
     };
     let info = SeqInfo {
         name: "evaltest".into(),
@@ -190,7 +208,7 @@ fn tracker_boxes_are_scored_for_tracking_and_speed() {
 fn post_processing_removes_box_fluctuation() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("seq");
-    write_sequence_with(&dir, true);
+    write_sequence_with(&dir, true, 3);
     let seq = Sequence::open(&dir).unwrap();
     let mut opts = EvalOptions { postprocess: fme::postprocess::PostprocessConfig::paper(), ..Default::default() };
     opts.motion.speed_span = fme::units::Seconds(0.0);
@@ -227,6 +245,28 @@ fn relative_gt_with_inverse_and_robust_fits_gets_depth_right() {
     assert!(fouled.depth_body_rmse_m.unwrap() > 0.1, "{}", summary(&fouled));
     assert!(robust.depth_rmse_m.unwrap() < 0.01, "{}", summary(&robust));
     assert_eq!(robust.references_rejected, 2 * N as u64);
+}
+
+#[test]
+fn visible_sampling_reads_a_half_hidden_fish_where_it_is_seen() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("seq");
+    write_sequence_hidden(&dir);
+    let seq = Sequence::open(&dir).unwrap();
+    let mut opts = EvalOptions { depth: DepthChoice::RelativeGt, fit: FitChoice::Inverse, ..Default::default() };
+    opts.relative.pixel_noise = 0.0;
+    opts.relative.low_freq = 0.0;
+    // The near quarter of the whole core is fish 0, 1 m in front of fish 3: 1 m of error on one
+    // fish in four.
+    opts.depth_sample = fme::metric::DepthSample::Box;
+    let boxed = evaluate(&seq, &opts).unwrap();
+    assert!(boxed.depth_body_rmse_m.unwrap() > 0.4, "{}", summary(&boxed));
+    // Where no other box covers it, fish 3 is itself; every fish keeps its depth.
+    opts.depth_sample = fme::metric::DepthSample::Visible;
+    let visible = evaluate(&seq, &opts).unwrap();
+    assert!(visible.depth_body_rmse_m.unwrap() < 0.02, "{}", summary(&visible));
+    assert_eq!(visible.depth_body_coverage, Some(1.0), "{}", summary(&visible));
+    assert!(visible.speed_rmse_mps < boxed.speed_rmse_mps, "{} vs {}", summary(&visible), summary(&boxed));
 }
 
 #[test]

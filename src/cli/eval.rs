@@ -135,9 +135,10 @@ fn table(r: &EvalReport) -> String {
     }
     if r.depth_body_rmse_m.is_some() {
         lines.push(format!(
-            "depth at body     RMSE {} m  d<1.25 {}  (against each fish's body centre, gt/world.csv)",
+            "depth at body     RMSE {} m  d<1.25 {}  for {} of the fish (against each body centre, gt/world.csv)",
             opt(r.depth_body_rmse_m, 3),
-            opt(r.depth_body_delta_1_25, 3)
+            opt(r.depth_body_delta_1_25, 3),
+            r.depth_body_coverage.map_or("-".to_string(), |c| format!("{:.0}%", 100.0 * c))
         ));
     }
     lines.push(format!("corrections       {} boxes (eq. 3), {} depths (eq. 4)", r.boxes_corrected, r.depths_corrected));

@@ -186,6 +186,10 @@ pub struct EvalReport {
     /// Same pairs: fraction with max(est/true, true/est) < 1.25.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_body_delta_1_25: Option<f64>,
+    /// Fraction of the ground-truth boxes (with a `world.csv` row) that got a depth, i.e. that the
+    /// body-centre score covers; `visible` sampling gives hidden fish none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_body_coverage: Option<f64>,
     /// Mean residual of the per-frame metric fits at the references, metres.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fit_residual_m: Option<f64>,
@@ -350,7 +354,7 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
     let mut obs: Vec<TrackObservation> = Vec::new();
     let mut gt_map = Vec::new();
     let mut depth_acc = DepthAccuracy::default();
-    let mut body_acc = DepthAccuracy::default();
+    let (mut body_acc, mut body_boxes) = (DepthAccuracy::default(), 0usize);
     // Camera z of each fish's body centre by (frame, id): ground-truth boxes carry world.csv's ids.
     let body_z: HashMap<(u32, u32), f64> = if estimated && opts.boxes == BoxesChoice::Gt {
         seq.world.iter().map(|r| ((r.frame, r.id), seq.camera.pose.to_camera(&r.position).depth().0)).collect()
@@ -413,7 +417,7 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         obs.extend(boxes.iter().map(|&(id, bbox)| TrackObservation { id, bbox, depth: None }));
         // The other fish's boxes overlapping `o`'s box `b` (for `DepthSample::Visible`).
         let overlaps = |o: &TrackObservation, b: &PixelBox| {
-            Overlaps::collect(b, obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox))
+            Overlaps::collect(b, 0.5, obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox))
         };
         let depth_at = |o: &TrackObservation, px: Pixel| -> Option<Metres> {
             let fitted = |r: f64| last_fit.as_ref()?.depth(r);
@@ -456,8 +460,11 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
                 if let (Some(e), Some(g)) = (e, g) {
                     depth_acc.add(e.0, g);
                 }
-                if let (Some(e), Some(&z)) = (e, body_z.get(&(frame, o.id))) {
-                    body_acc.add(e.0, z);
+                if let Some(&z) = body_z.get(&(frame, o.id)) {
+                    body_boxes += 1;
+                    if let Some(e) = e {
+                        body_acc.add(e.0, z);
+                    }
                 }
             }
         }
@@ -540,6 +547,7 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         depth_delta_1_25_2: depth_acc.delta_1_25_2(),
         depth_body_rmse_m: body_acc.rmse(),
         depth_body_delta_1_25: body_acc.delta_1_25(),
+        depth_body_coverage: (body_boxes > 0).then(|| body_acc.count() as f64 / body_boxes as f64),
         fit_residual_m: (residual_n > 0).then(|| residual_sum / residual_n as f64),
         fit_failures,
         references_visible: ref_px.len(),

@@ -13,14 +13,16 @@ pub enum DepthSample {
     Box,
     /// As `Box`, but only where no other fish's box covers the core ([`sample_box_quantile_visible`]):
     /// a fish partly hidden behind another is read where it is seen, not on the fish in front. A fish
-    /// with fewer than [`MIN_VISIBLE_POINTS`] of its 81 grid points uncovered gets no depth in that
-    /// frame (the estimator skips it; its speed resumes from its last position when it reappears).
+    /// that another box covers, with fewer than [`MIN_VISIBLE_POINTS`] of its 81 grid points left
+    /// uncovered (and inside the image), gets no depth in that frame: the estimator skips it, and its
+    /// speed resumes from its last position when it is seen again. At most [`MAX_OVERLAPS`] other
+    /// boxes are considered per fish.
     Visible,
 }
 
-/// Uncovered grid points (of 81) [`DepthSample::Visible`] needs to read a fish. Chosen on held-out
-/// swarms (seeds 7031-7033, groups B and D: 8, 15, 22, 30 and 50 tried; 15 best, 30 and 50 drop so
-/// many fish that the swarm mean is biased low, 8 lets the fish in front back in).
+/// Uncovered grid points (of 81) [`DepthSample::Visible`] needs to read a covered fish. Chosen on
+/// set 7021's swarms (seeds 7031-7033, groups B and D: 8, 15, 22, 30 and 50 tried; 15 best; 30 and
+/// 50 leave out so many fish that the swarm mean is biased low, 8 lets the fish in front back in).
 pub const MIN_VISIBLE_POINTS: usize = 15;
 
 /// A borrowed single-channel map (relative inverse depth, or metric depth), row-major.
@@ -92,27 +94,33 @@ pub fn sample_median(map: &RelativeMap<'_>, px: Pixel, radius: usize, values_ok:
     Some(m)
 }
 
-/// Most other boxes [`Overlaps`] keeps for one fish. More happens only inside a wall of fish; the
-/// ones left out can only make the fish look more visible than it is.
+/// Most other boxes [`Overlaps`] keeps for one fish, in the order given. Past that (a wall of fish)
+/// the rest are left out, and what they cover counts as visible: the fish may then be read on one
+/// of them, as [`DepthSample::Box`] would.
 pub const MAX_OVERLAPS: usize = 16;
 
-/// Boxes of other fish that overlap one fish's box: where they cover it, the depth map may show
-/// those fish (in front) instead of this one. Which fish is in front is not known, so every
-/// overlapping box counts; the fish in front loses only the part of its core it shares. Fixed
-/// capacity, allocation-free.
+/// Boxes of other fish that overlap the core of one fish's box (the part the samplers read): where
+/// they cover it, the depth map may show those fish (in front) instead of this one. Which fish is in
+/// front is not known, so every overlapping box counts; the fish in front loses only the part of
+/// its core it shares. Fixed capacity, allocation-free.
 #[derive(Debug, Clone, Default)]
 pub struct Overlaps {
     boxes: heapless::Vec<PixelBox, MAX_OVERLAPS>,
 }
 
 impl Overlaps {
-    /// The boxes among `others` that intersect `bbox` (not including `bbox` itself: pass the other
-    /// fish only); beyond [`MAX_OVERLAPS`] the rest are ignored.
-    pub fn collect<'b>(bbox: &PixelBox, others: impl IntoIterator<Item = &'b PixelBox>) -> Self {
+    /// The boxes among `others` that intersect the central `frac` of `bbox` (pass the other fish
+    /// only, not `bbox` itself); past [`MAX_OVERLAPS`] the rest are left out.
+    pub fn collect<'b>(bbox: &PixelBox, frac: f64, others: impl IntoIterator<Item = &'b PixelBox>) -> Self {
+        let f = frac.clamp(0.0, 1.0);
+        let core = PixelBox::from_center(bbox.center(), bbox.w * f, bbox.h * f);
         let mut boxes = heapless::Vec::new();
         for b in others {
-            let hit =
-                b.is_valid() && b.x < bbox.right() && bbox.x < b.right() && b.y < bbox.bottom() && bbox.y < b.bottom();
+            let hit = b.is_valid()
+                && b.x <= core.right()
+                && core.x <= b.right()
+                && b.y <= core.bottom()
+                && core.y <= b.bottom();
             if hit && boxes.push(*b).is_err() {
                 break;
             }
@@ -137,11 +145,12 @@ impl Overlaps {
     }
 }
 
-/// [`sample_box_quantile`] over the grid points that no other fish's box covers; `None` when fewer
-/// than `min_visible` of them (with data) are left: the fish is hidden, and whatever the map shows
-/// there is another fish. A fish partly hidden behind another is read where it is seen, not on the
-/// fish in front (whose near quarter the plain quantile picks). With no overlapping box this is
-/// [`sample_box_quantile`].
+/// [`sample_box_quantile`] over the grid points that no other fish's box covers. When another box
+/// covers any of them and fewer than `min_visible` uncovered points with data are left, `None`: the
+/// fish is hidden, and whatever the map shows there is another fish. A fish partly hidden behind
+/// another is read where it is seen, not on the fish in front (whose near quarter the plain quantile
+/// picks). Where nothing covers it, this is exactly [`sample_box_quantile`]. `overlaps` should come
+/// from [`Overlaps::collect`] with the same box and `frac`.
 pub fn sample_box_quantile_visible(
     bbox: &PixelBox,
     frac: f64,
@@ -150,10 +159,7 @@ pub fn sample_box_quantile_visible(
     min_visible: usize,
     at: impl Fn(Pixel) -> Option<f64>,
 ) -> Option<f64> {
-    if overlaps.is_empty() {
-        return sample_box_quantile(bbox, frac, q, at);
-    }
-    box_grid_quantile(bbox, frac, q, |p| !overlaps.covers(p), min_visible.max(1), &at)
+    box_grid_quantile(bbox, frac, q, |p| !overlaps.covers(p), min_visible, &at)
 }
 
 /// A low quantile of the values on a 9x9 grid spread over the central `frac` of a box (clipped to
@@ -165,13 +171,14 @@ pub fn sample_box_quantile(bbox: &PixelBox, frac: f64, q: f64, at: impl Fn(Pixel
     box_grid_quantile(bbox, frac, q, |_| true, 1, &at)
 }
 
-/// The `q` quantile of the values at the grid points `keep` accepts; `None` with fewer than `min_n`.
+/// The `q` quantile of the values at the grid points `keep` accepts; `None` when there are none, or
+/// when `keep` turned any point away and fewer than `min_kept` are left.
 fn box_grid_quantile(
     bbox: &PixelBox,
     frac: f64,
     q: f64,
     keep: impl Fn(Pixel) -> bool,
-    min_n: usize,
+    min_kept: usize,
     at: &impl Fn(Pixel) -> Option<f64>,
 ) -> Option<f64> {
     if !bbox.is_valid() {
@@ -181,13 +188,14 @@ fn box_grid_quantile(
     let c = bbox.center();
     let (hw, hh) = (0.5 * bbox.w * frac.clamp(0.0, 1.0), 0.5 * bbox.h * frac.clamp(0.0, 1.0));
     let mut buf = [0f64; G * G];
-    let mut n = 0;
+    let (mut n, mut turned_away) = (0, false);
     for j in 0..G {
         let v = c.v - hh + 2.0 * hh * j as f64 / (G - 1) as f64;
         for i in 0..G {
             let u = c.u - hw + 2.0 * hw * i as f64 / (G - 1) as f64;
             let p = Pixel::new(u, v);
             if !keep(p) {
+                turned_away = true;
                 continue;
             }
             if let Some(val) = at(p).filter(|x| x.is_finite()) {
@@ -196,7 +204,7 @@ fn box_grid_quantile(
             }
         }
     }
-    if n == 0 || n < min_n {
+    if n == 0 || (turned_away && n < min_kept) {
         return None;
     }
     let vals = &mut buf[..n];
@@ -258,7 +266,7 @@ mod tests {
         let far = PixelBox::new(0.0, 17.0, 3.0, 3.0);
         // The plain near quarter of A's core is fish B.
         assert_eq!(sample_box_quantile(&a, 0.5, 0.25, |p| map.at(p)), Some(2.0));
-        let ov = Overlaps::collect(&a, [&b, &far]);
+        let ov = Overlaps::collect(&a, 0.5, [&b, &far]);
         assert_eq!(ov.len(), 1, "the far box does not overlap A");
         assert!(ov.covers(Pixel::new(9.0, 10.0)) && !ov.covers(Pixel::new(6.0, 10.0)));
         // 4 of 9 grid columns (36 points) are uncovered: A is read where it is seen.
@@ -267,10 +275,10 @@ mod tests {
         assert_eq!(sample_box_quantile_visible(&a, 0.5, 0.25, &ov, 37, |p| map.at(p)), None);
         assert_eq!(sample_box_quantile_visible(&a, 0.5, 0.25, &ov, 36, |p| map.at(p)), Some(3.0));
         // B in front keeps reading itself: its uncovered part is B too.
-        let ov_b = Overlaps::collect(&b, [&a]);
+        let ov_b = Overlaps::collect(&b, 0.5, [&a]);
         assert_eq!(sample_box_quantile_visible(&b, 0.5, 0.25, &ov_b, MIN_VISIBLE_POINTS, |p| map.at(p)), Some(2.0));
         // No overlaps: the same as the plain quantile.
-        let none = Overlaps::collect(&a, []);
+        let none = Overlaps::collect(&a, 0.5, []);
         assert!(none.is_empty());
         assert_eq!(
             sample_box_quantile_visible(&a, 0.5, 0.25, &none, MIN_VISIBLE_POINTS, |p| map.at(p)),
@@ -282,9 +290,35 @@ mod tests {
     fn overlaps_keep_at_most_max_overlaps_and_skip_invalid_boxes() {
         let core = PixelBox::new(0.0, 0.0, 10.0, 10.0);
         let many = [PixelBox::new(1.0, 1.0, 2.0, 2.0); MAX_OVERLAPS + 5];
-        assert_eq!(Overlaps::collect(&core, many.iter()).len(), MAX_OVERLAPS);
-        let odd = [PixelBox::new(f64::NAN, 1.0, 2.0, 2.0), PixelBox::new(10.0, 0.0, 5.0, 5.0)];
-        assert!(Overlaps::collect(&core, odd.iter()).is_empty(), "NaN box and a box only touching the edge");
+        assert_eq!(Overlaps::collect(&core, 1.0, many.iter()).len(), MAX_OVERLAPS);
+        // Invalid boxes: a NaN corner, a negative width reaching back over the core.
+        let odd = [PixelBox::new(f64::NAN, 1.0, 2.0, 2.0), PixelBox::new(5.0, 5.0, -2.0, 2.0)];
+        assert!(Overlaps::collect(&core, 1.0, odd.iter()).is_empty());
+        // Only the core counts: a box over the outer ring (x 0..2) of a 10-pixel box is not kept
+        // for its central half (x 2.5..7.5), but is for the whole box.
+        let ring = [PixelBox::new(0.0, 0.0, 2.0, 10.0)];
+        assert!(Overlaps::collect(&core, 0.5, ring.iter()).is_empty());
+        assert_eq!(Overlaps::collect(&core, 1.0, ring.iter()).len(), 1);
+    }
+
+    #[test]
+    fn visible_quantile_is_the_plain_one_when_nothing_covers_the_core() {
+        // A fish at the right edge of a 20x20 map: 2 of the 9 grid columns of its core are inside
+        // (18 points), fewer than the 30 asked for here; that only matters once a box covers it.
+        let data = vec![2.0f32; 400];
+        let map = RelativeMap::new(&data, 20, 20).unwrap();
+        let edge = PixelBox::new(12.0, 4.0, 24.0, 12.0);
+        let plain = sample_box_quantile(&edge, 0.5, 0.25, |p| map.at(p));
+        assert_eq!(plain, Some(2.0));
+        let far_off = PixelBox::new(0.0, 0.0, 3.0, 3.0);
+        let ov = Overlaps::collect(&edge, 0.5, [&far_off]);
+        assert!(ov.is_empty());
+        assert_eq!(sample_box_quantile_visible(&edge, 0.5, 0.25, &ov, 30, |p| map.at(p)), plain);
+        // A box covering some of its core: now too few are left.
+        let cover = PixelBox::new(17.0, 4.0, 2.0, 12.0);
+        let ov = Overlaps::collect(&edge, 0.5, [&cover]);
+        assert_eq!(ov.len(), 1);
+        assert_eq!(sample_box_quantile_visible(&edge, 0.5, 0.25, &ov, 30, |p| map.at(p)), None);
     }
 
     #[test]

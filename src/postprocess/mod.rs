@@ -41,9 +41,10 @@ pub enum BoxAnchor {
 
 /// Depth smoothing for depth estimated by a network (`fme run`'s default, `fme eval --depth model`'s
 /// default). Measured on held-out swarms (README): without it the network's flicker becomes speed
-/// (+0.09 to +0.20 m/s of bias); longer than 1 s it damps real depth motion (-0.03 to -0.05 m/s at
-/// 2 s with the bundled network); with ground-truth depth it only adds lag, so the library default is off.
-pub const ESTIMATED_DEPTH_SMOOTHING: Seconds = Seconds(1.0);
+/// (+0.09 to +0.20 m/s of bias); longer, it damps real depth motion (-0.03 to -0.05 m/s at 2 s).
+/// 0.75 s since depth is read only where a fish is seen (`depth.sample = "visible"`): less flicker
+/// to smooth. With ground-truth depth it only adds lag, so the library default is off.
+pub const ESTIMATED_DEPTH_SMOOTHING: Seconds = Seconds(0.75);
 
 /// Post-processing settings (the `[postprocess]` config section).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

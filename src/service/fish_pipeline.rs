@@ -311,7 +311,7 @@ impl Pipeline for FishPipeline {
                 DepthSample::Box => sample_box_quantile(&PixelBox::from_center(px, o.bbox.w, o.bbox.h), 0.5, 0.75, at)?,
                 DepthSample::Visible => {
                     let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
-                    let ov = Overlaps::collect(&b, obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox));
+                    let ov = Overlaps::collect(&b, 0.5, obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox));
                     sample_box_quantile_visible(&b, 0.5, 0.75, &ov, MIN_VISIBLE_POINTS, at)?
                 }
                 DepthSample::Centre => f64::from(map.sample(px)?),
