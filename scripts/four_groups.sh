@@ -17,7 +17,7 @@ B=${SEED_BASE:-7021}
 [ -x "$FME" ] || cargo build --release --locked --bin fme
 mkdir -p "$OUT/results-$B"
 synth() { local out=$1; shift; [ -f "$out/seqinfo.ini" ] || "$FME" synth --out "$out" --force "$@" >/dev/null; }
-# Seeds 7001-7012 were used to choose the depth smoothing and sampling of estimated depth (README).
+# Seeds 7001-7012 chose the first depth smoothing and box sampling; set 7021 their current values (README).
 synth "$OUT/single-s$B" --preset single --frames "$FRAMES" --seed "$B" --layout F --water 3C
 synth "$OUT/single-s$((B + 1))" --preset single --frames "$FRAMES" --seed "$((B + 1))" --layout F --water I
 synth "$OUT/swarm20-s$((B + 10))" --preset swarm --fish 20 --frames "$FRAMES" --seed "$((B + 10))" --layout F --water 3C

@@ -11,8 +11,8 @@ use crate::infer::{self, DepthNet, Detector, RelDepthMap, RgbFrame, SessionOptio
 pub use crate::metric::DepthSample;
 use crate::metric::regressors::{Regressor, RegressorKind};
 use crate::metric::{
-    FitMethod, MIN_VISIBLE_POINTS, Overlaps, ROBUST_INLIER, ReferencePair, ReferencePoints, References, RelativeMap,
-    ScaleShift, sample_box_quantile, sample_box_quantile_visible, sample_median,
+    FitMethod, MapKind, ROBUST_INLIER, ReferencePair, ReferencePoints, References, RelativeMap, ScaleShift,
+    sample_fish, sample_median,
 };
 use crate::mot::MotMetrics;
 use crate::motion::{ActivityEstimator, MotionConfig, TrackObservation};
@@ -415,47 +415,38 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         }
         obs.clear();
         obs.extend(boxes.iter().map(|&(id, bbox)| TrackObservation { id, bbox, depth: None }));
-        // The other fish's boxes overlapping `o`'s box `b` (for `DepthSample::Visible`).
-        let overlaps = |o: &TrackObservation, b: &PixelBox| {
-            Overlaps::collect(b, 0.5, obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox))
+        // The other fish's boxes (what may cover `o` for `DepthSample::Visible`).
+        let others = |id: u32| obs.iter().filter(move |x| x.id != id).map(|x| &x.bbox);
+        // Ground truth in metres in `bbox`, or at its centre with the paper's window.
+        let gt_at = |o: &TrackObservation, bbox: &PixelBox| {
+            let c = bbox.center();
+            sample_fish(
+                opts.depth_sample,
+                MapKind::Depth,
+                bbox,
+                others(o.id),
+                || sample_median(&gt, c, radius, |_| true),
+                |p| gt.at(p),
+            )
         };
         let depth_at = |o: &TrackObservation, px: Pixel| -> Option<Metres> {
-            let fitted = |r: f64| last_fit.as_ref()?.depth(r);
+            let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
+            if !estimated {
+                return gt_at(o, &b).map(Metres);
+            }
             // Relative inverse depth of the network or of ground truth at one grid point.
             let rel_at = |p| match map {
                 Some(m) => m.sample_with_radius(p, 0).map(f64::from),
                 None => relative_at(&opts.relative, &dm, frame, p),
             };
-            let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
-            // Larger relative inverse depth is nearer: its 75% quantile is the near quarter, as
-            // ground truth's 25% quantile in metres.
-            match (estimated, opts.depth_sample) {
-                (true, DepthSample::Centre) => fitted(rel(px)?),
-                (false, DepthSample::Centre) => sample_median(&gt, px, radius, |_| true).map(Metres),
-                (true, DepthSample::Box) => fitted(sample_box_quantile(&b, 0.5, 0.75, rel_at)?),
-                (false, DepthSample::Box) => sample_box_quantile(&b, 0.5, 0.25, |p| gt.at(p)).map(Metres),
-                (true, DepthSample::Visible) => {
-                    let ov = overlaps(o, &b);
-                    fitted(sample_box_quantile_visible(&b, 0.5, 0.75, &ov, MIN_VISIBLE_POINTS, rel_at)?)
-                }
-                (false, DepthSample::Visible) => {
-                    let ov = overlaps(o, &b);
-                    sample_box_quantile_visible(&b, 0.5, 0.25, &ov, MIN_VISIBLE_POINTS, |p| gt.at(p)).map(Metres)
-                }
-            }
+            let r = sample_fish(opts.depth_sample, MapKind::InverseDepth, &b, others(o.id), || rel(px), rel_at)?;
+            last_fit.as_ref()?.depth(r)
         };
         if estimated {
             for o in &obs {
                 let c = o.bbox.center();
                 // Ground truth read the same way as the estimate (the same pixels).
-                let g = match opts.depth_sample {
-                    DepthSample::Centre => sample_median(&gt, c, radius, |_| true),
-                    DepthSample::Box => sample_box_quantile(&o.bbox, 0.5, 0.25, |p| gt.at(p)),
-                    DepthSample::Visible => {
-                        let ov = overlaps(o, &o.bbox);
-                        sample_box_quantile_visible(&o.bbox, 0.5, 0.25, &ov, MIN_VISIBLE_POINTS, |p| gt.at(p))
-                    }
-                };
+                let g = gt_at(o, &o.bbox);
                 let e = depth_at(o, c);
                 if let (Some(e), Some(g)) = (e, g) {
                     depth_acc.add(e.0, g);

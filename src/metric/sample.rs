@@ -25,6 +25,52 @@ pub enum DepthSample {
 /// 50 leave out so many fish that the swarm mean is biased low, 8 lets the fish in front back in).
 pub const MIN_VISIBLE_POINTS: usize = 15;
 
+/// Fraction of a box (each side, about its centre) whose grid the box samplers read: the fish's
+/// core, where a bent or thin fish still is and the water beside it mostly is not.
+pub const CORE_FRAC: f64 = 0.5;
+
+/// What a map holds, which says where its near quarter is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MapKind {
+    /// Relative inverse depth (a depth network's output): larger is nearer.
+    InverseDepth,
+    /// Metric depth (camera z): smaller is nearer.
+    Depth,
+}
+
+impl MapKind {
+    /// The quantile that is the near quarter of the values.
+    pub fn near_quarter(self) -> f64 {
+        match self {
+            MapKind::InverseDepth => 0.75,
+            MapKind::Depth => 0.25,
+        }
+    }
+}
+
+/// One fish's value from a map, read the way `how` says: `centre()` for [`DepthSample::Centre`]
+/// (the caller's window at the corrected centre), else the near quarter of `bbox`'s core read
+/// through `at`, for [`DepthSample::Visible`] only where none of `others` (the other fish's boxes)
+/// covers it. The daemon and `fme eval` both read fish through this, so they cannot drift apart.
+pub fn sample_fish<'b>(
+    how: DepthSample,
+    kind: MapKind,
+    bbox: &PixelBox,
+    others: impl IntoIterator<Item = &'b PixelBox>,
+    centre: impl FnOnce() -> Option<f64>,
+    at: impl Fn(Pixel) -> Option<f64>,
+) -> Option<f64> {
+    let q = kind.near_quarter();
+    match how {
+        DepthSample::Centre => centre(),
+        DepthSample::Box => sample_box_quantile(bbox, CORE_FRAC, q, at),
+        DepthSample::Visible => {
+            let overlaps = Overlaps::collect(bbox, CORE_FRAC, others);
+            sample_box_quantile_visible(bbox, CORE_FRAC, q, &overlaps, MIN_VISIBLE_POINTS, at)
+        }
+    }
+}
+
 /// A borrowed single-channel map (relative inverse depth, or metric depth), row-major.
 #[derive(Debug, Clone, Copy)]
 pub struct RelativeMap<'a> {
@@ -101,8 +147,9 @@ pub const MAX_OVERLAPS: usize = 16;
 
 /// Boxes of other fish that overlap the core of one fish's box (the part the samplers read): where
 /// they cover it, the depth map may show those fish (in front) instead of this one. Which fish is in
-/// front is not known, so every overlapping box counts; the fish in front loses only the part of
-/// its core it shares. Fixed capacity, allocation-free.
+/// front is not known, so every overlapping box counts: the fish in front loses the part of its core
+/// it shares, and one whose core lies almost all inside a bigger box behind it loses its depth for
+/// that frame too. Fixed capacity, allocation-free.
 #[derive(Debug, Clone, Default)]
 pub struct Overlaps {
     boxes: heapless::Vec<PixelBox, MAX_OVERLAPS>,
@@ -283,6 +330,30 @@ mod tests {
         assert_eq!(
             sample_box_quantile_visible(&a, 0.5, 0.25, &none, MIN_VISIBLE_POINTS, |p| map.at(p)),
             sample_box_quantile(&a, 0.5, 0.25, |p| map.at(p))
+        );
+    }
+
+    #[test]
+    fn sample_fish_dispatches_on_the_mode_and_the_map_kind() {
+        // Fish A at 3 m, half covered by fish B's box at 2 m (as above), as metres and as 1/depth.
+        let mut metres = vec![5.0f32; 400];
+        for y in 4..16 {
+            for x in 2..18 {
+                metres[y * 20 + x] = if x >= 8 { 2.0 } else { 3.0 };
+            }
+        }
+        let inverse: Vec<f32> = metres.iter().map(|d| 1.0 / d).collect();
+        let (m, inv) = (RelativeMap::new(&metres, 20, 20).unwrap(), RelativeMap::new(&inverse, 20, 20).unwrap());
+        let (a, b) = (PixelBox::new(2.0, 4.0, 12.0, 12.0), PixelBox::new(8.0, 4.0, 10.0, 12.0));
+        let read = |how, kind, map: &RelativeMap<'_>| sample_fish(how, kind, &a, [&b], || Some(-1.0), |p| map.at(p));
+        assert_eq!(read(DepthSample::Centre, MapKind::Depth, &m), Some(-1.0), "the caller's centre reader");
+        assert_eq!(read(DepthSample::Box, MapKind::Depth, &m), Some(2.0));
+        assert_eq!(read(DepthSample::Visible, MapKind::Depth, &m), Some(3.0));
+        // Larger inverse depth is nearer: the same fish either way.
+        assert_eq!(read(DepthSample::Box, MapKind::InverseDepth, &inv), Some(0.5));
+        assert_eq!(
+            read(DepthSample::Visible, MapKind::InverseDepth, &inv).map(|r| (1.0 / r * 1e4).round() / 1e4),
+            Some(3.0)
         );
     }
 

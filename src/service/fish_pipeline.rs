@@ -17,8 +17,7 @@ use crate::config::Config;
 use crate::geometry::{Camera, PixelBox};
 use crate::infer::{self, DepthNet, Detector, InferSchedule, RgbFrame, ScheduleConfig, SessionOptions};
 use crate::metric::{
-    DepthSample, FitMethod, MIN_VISIBLE_POINTS, Overlaps, ROBUST_INLIER, ReferenceFootprints, ReferencePoints,
-    ScaleShift, sample_box_quantile, sample_box_quantile_visible,
+    DepthSample, FitMethod, MapKind, ROBUST_INLIER, ReferenceFootprints, ReferencePoints, ScaleShift, sample_fish,
 };
 use crate::motion::{ActivityEstimator, TrackObservation};
 use crate::track::{self, Tracker};
@@ -305,17 +304,16 @@ impl Pipeline for FishPipeline {
         let (fit, map, how, obs) = (self.fit, self.depth.last_map(), self.depth_sample, &self.obs);
         let s = self.estimator.update_with(t, obs, |o, px| {
             let (fit, map) = (fit?, map?);
-            let at = |p| map.sample_with_radius(p, 0).map(f64::from);
-            // Larger relative inverse depth is nearer: the 75% quantile of R is the near quarter.
-            let r = match how {
-                DepthSample::Box => sample_box_quantile(&PixelBox::from_center(px, o.bbox.w, o.bbox.h), 0.5, 0.75, at)?,
-                DepthSample::Visible => {
-                    let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
-                    let ov = Overlaps::collect(&b, 0.5, obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox));
-                    sample_box_quantile_visible(&b, 0.5, 0.75, &ov, MIN_VISIBLE_POINTS, at)?
-                }
-                DepthSample::Centre => f64::from(map.sample(px)?),
-            };
+            let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
+            let others = obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox);
+            let r = sample_fish(
+                how,
+                MapKind::InverseDepth,
+                &b,
+                others,
+                || map.sample(px).map(f64::from),
+                |p| map.sample_with_radius(p, 0).map(f64::from),
+            )?;
             fit.depth(r)
         });
         let mean = s.mean.map_or(f64::NAN, |m| m.0);
