@@ -218,15 +218,22 @@ fn post_processing_removes_box_fluctuation() {
     assert!(r.speed_rmse_mps < 0.5 * r.speed_rmse_raw_mps, "{}", summary(&r));
 }
 
+/// Ground-truth depth made relative without noise, then the inverse fit: the depth path with
+/// nothing in it that is not exact.
+fn exact_relative_gt() -> EvalOptions {
+    let mut opts = EvalOptions { depth: DepthChoice::RelativeGt, fit: FitChoice::Inverse, ..Default::default() };
+    opts.relative.pixel_noise = 0.0;
+    opts.relative.low_freq = 0.0;
+    opts
+}
+
 #[test]
 fn relative_gt_with_inverse_and_robust_fits_gets_depth_right() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("seq");
     write_sequence(&dir);
     let seq = Sequence::open(&dir).unwrap();
-    let mut opts = EvalOptions { depth: DepthChoice::RelativeGt, fit: FitChoice::Inverse, ..Default::default() };
-    opts.relative.pixel_noise = 0.0;
-    opts.relative.low_freq = 0.0;
+    let mut opts = exact_relative_gt();
     let exact = evaluate(&seq, &opts).unwrap();
     assert_eq!(exact.references_visible, 6);
     assert!(exact.depth_rmse_m.unwrap() < 0.01, "{}", summary(&exact));
@@ -253,9 +260,7 @@ fn visible_sampling_reads_a_half_hidden_fish_where_it_is_seen() {
     let dir = tmp.path().join("seq");
     write_sequence_hidden(&dir);
     let seq = Sequence::open(&dir).unwrap();
-    let mut opts = EvalOptions { depth: DepthChoice::RelativeGt, fit: FitChoice::Inverse, ..Default::default() };
-    opts.relative.pixel_noise = 0.0;
-    opts.relative.low_freq = 0.0;
+    let mut opts = exact_relative_gt();
     // The near quarter of the whole core is fish 0, 1 m in front of fish 3: 1 m of error on one
     // fish in four.
     opts.depth_sample = fme::metric::DepthSample::Box;

@@ -297,19 +297,23 @@ mod tests {
         assert_eq!(sample_box_quantile(&bad, 0.5, 0.25, |p| map.at(p)), None);
     }
 
-    #[test]
-    fn visible_quantile_reads_the_hidden_fish_not_the_one_in_front() {
-        // Wall at 5 m; fish A at 3 m fills x 2..14, y 4..16; fish B at 2 m in front of it fills
-        // x 8..18, y 4..16. A's core (central half: x 5..11) is covered by B's box from x 8 on.
+    /// A 20x20 metric depth map: wall at 5 m; fish A at 3 m fills x 2..14, y 4..16; fish B at 2 m in
+    /// front of it fills x 8..18, y 4..16. A's core (central half: x 5..11) is covered by B's box
+    /// from x 8 on. Returns the map's data and the boxes of A and B.
+    fn half_hidden_fish() -> (Vec<f32>, PixelBox, PixelBox) {
         let mut data = vec![5.0f32; 400];
         for y in 4..16 {
             for x in 2..18 {
                 data[y * 20 + x] = if x >= 8 { 2.0 } else { 3.0 };
             }
         }
+        (data, PixelBox::new(2.0, 4.0, 12.0, 12.0), PixelBox::new(8.0, 4.0, 10.0, 12.0))
+    }
+
+    #[test]
+    fn visible_quantile_reads_the_hidden_fish_not_the_one_in_front() {
+        let (data, a, b) = half_hidden_fish();
         let map = RelativeMap::new(&data, 20, 20).unwrap();
-        let a = PixelBox::new(2.0, 4.0, 12.0, 12.0);
-        let b = PixelBox::new(8.0, 4.0, 10.0, 12.0);
         let far = PixelBox::new(0.0, 17.0, 3.0, 3.0);
         // The plain near quarter of A's core is fish B.
         assert_eq!(sample_box_quantile(&a, 0.5, 0.25, |p| map.at(p)), Some(2.0));
@@ -335,16 +339,10 @@ mod tests {
 
     #[test]
     fn sample_fish_dispatches_on_the_mode_and_the_map_kind() {
-        // Fish A at 3 m, half covered by fish B's box at 2 m (as above), as metres and as 1/depth.
-        let mut metres = vec![5.0f32; 400];
-        for y in 4..16 {
-            for x in 2..18 {
-                metres[y * 20 + x] = if x >= 8 { 2.0 } else { 3.0 };
-            }
-        }
+        // The same scene as metres and as 1/depth.
+        let (metres, a, b) = half_hidden_fish();
         let inverse: Vec<f32> = metres.iter().map(|d| 1.0 / d).collect();
         let (m, inv) = (RelativeMap::new(&metres, 20, 20).unwrap(), RelativeMap::new(&inverse, 20, 20).unwrap());
-        let (a, b) = (PixelBox::new(2.0, 4.0, 12.0, 12.0), PixelBox::new(8.0, 4.0, 10.0, 12.0));
         let read = |how, kind, map: &RelativeMap<'_>| sample_fish(how, kind, &a, [&b], || Some(-1.0), |p| map.at(p));
         assert_eq!(read(DepthSample::Centre, MapKind::Depth, &m), Some(-1.0), "the caller's centre reader");
         assert_eq!(read(DepthSample::Box, MapKind::Depth, &m), Some(2.0));
