@@ -22,11 +22,28 @@ def budget_note(d):
     return f" (the time budget stopped it in epoch {run})" if run < d["epochs"] else ""
 
 
+def sub_note(st):
+    if st == 4:
+        return ""
+    return (f"\nThe head's last 1x1 convolution predicts {4 // st}x{4 // st} sub-cells per stride-4 cell, so heat map and boxes\n"
+            f"come out at stride {st}: two fish one stride-4 cell apart keep two peaks.")
+
+
+def tail_note(d):
+    """The card's sentence for a model whose decode tail was re-exported after training."""
+    if "decode_tail" not in d:
+        return ""
+    return ("\nThe bundled files' in-graph decode was re-exported after training (same weights, identical\n"
+            "boxes and scores, columns in another order) and re-quantised with the same calibration frames:\n"
+            "quality is from the first export, timings are of these files.")
+
+
 def det_card(m):
     d = m["detector"]
     data = d["data"]
     stopped = budget_note(d)
     w, h = d.get("input", [320, 192])
+    st = d.get("output_stride", 4)
     rows = []
     for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
         if tag not in d:
@@ -45,8 +62,8 @@ the faster int8 variant on this machine).
 ## Convention (same as an Ultralytics YOLOv8/YOLO11 detection export)
 - Input `images` float32 `[1, 3, {h}, {w}]`, RGB in 0..1, letterboxed (centred, pad 114/255).
   640x384 frames scale by {w / 640:g} with no padding.
-- Output `output0` float32 `[1, 5, {w * h // 16}]`: cx, cy, w, h in input pixels, then the fish score
-  (sigmoided; no objectness; no NMS in the graph). One column per stride-4 cell; only local maxima
+- Output `output0` float32 `[1, 5, {w * h // (st * st)}]`: cx, cy, w, h in input pixels, then the fish score
+  (sigmoided; no objectness; no NMS in the graph). One column per stride-{st} cell; only local maxima
   of the score map (3x3) have a non-zero score. fme decodes, runs NMS and un-letterboxes in Rust
   (`fme::infer::Detector`).
 
@@ -54,7 +71,7 @@ the faster int8 variant on this machine).
 Plain 3x3-conv ReLU backbone (strides 2 to 32, residual blocks), top-down FPN to one stride-4
 CenterNet-style head (centre heatmap with focal loss; sub-cell offset and log size with L1 and GIoU
 on every cell where a fish's heat-map Gaussian is >= 0.4, as TTFNet), box decode and peak extraction
-inside the graph. {d.get('params_m', 1.10)} M parameters. Code: `training/det.py`.
+inside the graph.{sub_note(st)} {d.get('params_m', 1.10)} M parameters. Code: `training/det.py`.
 
 ## Data
 Rendered with `fme synth --preset swarm` (20 to 60 fish, water types I, II, III, 1C, 3C, 5C, 7C,
@@ -65,7 +82,7 @@ layouts A to F, 640x384): training seeds {data.get('train_seeds')} ({data['train
 ## Training
 `bash training/train.sh` (or `make -C training all`): CPU, torch {m.get('torch', '2.15.0')}, AdamW, one-cycle LR,
 batch 16, {d['epochs']} epochs requested{stopped}, fixed seeds. Training time on this 2-core machine (shared):
-{d['train_seconds']:.0f} s{autocast_note(d)}.
+{d['train_seconds']:.0f} s{autocast_note(d)}.{tail_note(d)}
 
 ## Quality on the held-out sequences
 Precision / recall at IoU 0.5 against the ground-truth boxes clipped to the frame; boxes with

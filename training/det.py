@@ -2,10 +2,11 @@
 
 Architecture: a plain 3x3-conv backbone (strides 2-32, ReLU: fuses and quantises well in ONNX
 Runtime) with a top-down FPN to one stride-4 head (CenterNet-style: centre heatmap, sub-cell
-offset, log size). The box decode is inside the graph, so the ONNX output is exactly the YOLO
-export layout `[1, 5, N]`: cx, cy, w, h in input pixels, then the sigmoided fish score, one column
-per stride-4 cell (N = H/4 * W/4; non-peak cells score 0). fme's Rust decoder and NMS read it
-like any YOLO11 export.
+offset, log size). With sub=2 the head's last 1x1 convolution predicts 2x2 sub-cells per stride-4
+cell (pixel shuffle), so heat map and boxes come out at stride 2. The box decode is inside the
+graph, so the ONNX output is exactly the YOLO export layout `[1, 5, N]`: cx, cy, w, h in input
+pixels, then the sigmoided fish score, one column per output cell (N = H/s * W/s at output stride
+s; non-peak cells score 0). fme's Rust decoder and NMS read it like any YOLO11 export.
 """
 import math
 import os
@@ -16,7 +17,9 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-STRIDE = 4
+STRIDE = 4  # stride of the head's features; the output stride is STRIDE // sub
+# Smallest heat-map Gaussian sigma, in input pixels (0.6 stride-4 cells, as before sub-cells).
+SIGMA_MIN_PX = 2.4
 
 
 def conv(cin, cout, s=1, k=3):
@@ -34,8 +37,10 @@ class Block(nn.Module):
 
 
 class FishDet(nn.Module):
-    def __init__(self, w=(16, 32, 64, 96, 128), fpn=64, head=32):
+    def __init__(self, w=(16, 32, 64, 96, 128), fpn=64, head=32, sub=1):
         super().__init__()
+        self.sub = sub
+        self.stride = STRIDE // sub
         self.stem = conv(3, w[0], 2)
         self.s4 = nn.Sequential(conv(w[0], w[1], 2), Block(w[1]))
         self.s8 = nn.Sequential(conv(w[1], w[2], 2), Block(w[2]), Block(w[2]))
@@ -50,11 +55,13 @@ class FishDet(nn.Module):
         self.r4 = conv(fpn, head, k=1)
         self.m4 = conv(head, head)
         self.h = conv(head, head)
-        self.out = nn.Conv2d(head, 5, 1)
-        nn.init.constant_(self.out.bias[0], -4.6)  # score prior 0.01
+        self.out = nn.Conv2d(head, 5 * sub * sub, 1)
+        # pixel_shuffle takes output channel c from input channels c*sub^2 .. (c+1)*sub^2 - 1.
+        nn.init.constant_(self.out.bias[0:sub * sub], -4.6)  # score prior 0.01
         self.export_decode = False
 
-    def raw(self, x):
+    def head_out(self, x):
+        """The head's last 1x1 convolution: [B, 5*sub^2, H/4, W/4]."""
         c4 = self.s4(self.stem(x))
         c8 = self.s8(c4)
         c16 = self.s16(c8)
@@ -62,24 +69,46 @@ class FishDet(nn.Module):
         p16 = self.m16(self.l16(c16) + F.interpolate(self.l32(c32), scale_factor=2.0, mode="nearest"))
         p8 = self.m8(self.l8(c8) + F.interpolate(p16, scale_factor=2.0, mode="nearest"))
         p4 = self.m4(self.l4(c4) + F.interpolate(self.r4(p8), scale_factor=2.0, mode="nearest"))
-        return self.out(self.h(p4))  # [B,5,H/4,W/4]: heat, ox, oy, lw, lh
+        return self.out(self.h(p4))
+
+    def raw(self, x):
+        o = self.head_out(x)
+        if self.sub > 1:
+            o = F.pixel_shuffle(o, self.sub)
+        return o  # [B,5,H/s,W/s]: heat, ox, oy, lw, lh
 
     def forward(self, x):
-        r = self.raw(x)
         if not self.export_decode:
-            return r
-        b, _, gh, gw = r.shape
-        gy, gx = torch.meshgrid(torch.arange(gh, dtype=x.dtype), torch.arange(gw, dtype=x.dtype), indexing="ij")
-        cx = (gx + 0.5 + r[:, 1]) * STRIDE
-        cy = (gy + 0.5 + r[:, 2]) * STRIDE
-        w = torch.exp(r[:, 3].clamp(-4.0, 6.0)) * STRIDE
-        h = torch.exp(r[:, 4].clamp(-4.0, 6.0)) * STRIDE
-        # CenterNet peak extraction: only local maxima of the heatmap (3x3) keep their score, so
-        # neighbouring cells do not report the same fish; fme's NMS then only has real overlaps.
-        hm = torch.sigmoid(r[:, 0:1])
-        peak = (F.max_pool2d(hm, 3, 1, 1) == hm).to(hm.dtype)
-        s = (hm * peak)[:, 0]
-        return torch.stack([cx, cy, w, h, s], 1).reshape(b, 5, gh * gw)
+            return self.raw(x)
+        return decode(self.head_out(x), self.sub)
+
+
+def decode(o, sub):
+    """The in-graph box decode and peak extraction of the exported model, from the head's output
+    [B, 5*sub^2, gh, gw] (stride-4 cells; channel c*sub^2 + a*sub + b is channel c of sub-cell row a,
+    column b, as pixel_shuffle reads it) to the YOLO layout [B, 5, sub^2*gh*gw]. Columns are ordered
+    by sub-cell, then cell (fme's decoder does not care about column order). The boxes are decoded
+    in the stride-4 layout; only the one-channel heat map is shuffled to stride STRIDE/sub for the
+    3x3 peak test and back: shuffling all five channels (DepthToSpace) had cost 0.24 ms of the
+    detector's ~6 ms."""
+    b, _, gh, gw = o.shape
+    st = STRIDE // sub
+    r = o.reshape(b, 5, sub * sub, gh, gw)
+    # Output-grid coordinates of every sub-cell, in output-stride units: constants in the graph.
+    k = torch.arange(sub * sub, dtype=o.dtype)
+    gy, gx = torch.meshgrid(torch.arange(gh, dtype=o.dtype), torch.arange(gw, dtype=o.dtype), indexing="ij")
+    xy = torch.stack([gx[None] * sub + (k % sub)[:, None, None], gy[None] * sub + (k // sub)[:, None, None]])
+    cxy = (xy[None] + 0.5 + r[:, 1:3]) * st
+    wh = torch.exp(r[:, 3:5].clamp(-4.0, 6.0)) * st
+    # CenterNet peak extraction: only local maxima of the heatmap (3x3 output cells) keep their
+    # score, so neighbouring cells do not report the same fish; fme's NMS then only has real overlaps.
+    hm = torch.sigmoid(r[:, 0])  # [B, sub^2, gh, gw]
+    hm_out = F.pixel_shuffle(hm, sub) if sub > 1 else hm
+    peak = (F.max_pool2d(hm_out, 3, 1, 1) == hm_out).to(hm.dtype)
+    if sub > 1:
+        peak = F.pixel_unshuffle(peak, sub)
+    s = (hm * peak)[:, None]
+    return torch.cat([cxy, wh, s], 1).reshape(b, 5, sub * sub * gh * gw)
 
 
 # Regression samples (TTFNet, Liu et al. 2020): besides its centre cell, every cell where a fish's
@@ -89,24 +118,25 @@ class FishDet(nn.Module):
 REG_GAUSS_MIN = 0.4
 
 
-def targets(boxes, gh, gw, min_vis, spread=True):
+def targets(boxes, gh, gw, min_vis, spread=True, stride=STRIDE):
     """CenterNet targets for one image: heat [gh,gw], reg [4,gh,gw] (cell-relative centre offset,
-    log width, log height, in stride units) and the regression weight [gh,gw] (each fish's weights
+    log width, log height, in units of the output stride `stride`) and the regression weight [gh,gw] (each fish's weights
     sum to about 1; with spread=False only its centre cell, weight 1). Each fish's Gaussian is
     evaluated within 3 sigma of its centre (beyond that it is below 0.012)."""
     heat = np.zeros((gh, gw), np.float32)
     reg = np.zeros((4, gh, gw), np.float32)
     weight = np.zeros((gh, gw), np.float32)
-    W, H = gw * STRIDE, gh * STRIDE
+    W, H = gw * stride, gh * stride
+    smin = SIGMA_MIN_PX / stride
     fish = []
     for x, y, w, h, vis in boxes:
         x0, y0 = max(x, 0.0), max(y, 0.0)
         x1, y1 = min(x + w, W), min(y + h, H)
         if x1 - x0 < 2 or y1 - y0 < 2 or vis < min_vis:
             continue
-        cx, cy, bw, bh = (x0 + x1) / 2 / STRIDE, (y0 + y1) / 2 / STRIDE, (x1 - x0) / STRIDE, (y1 - y0) / STRIDE
+        cx, cy, bw, bh = (x0 + x1) / 2 / stride, (y0 + y1) / 2 / stride, (x1 - x0) / stride, (y1 - y0) / stride
         ix, iy = min(int(cx), gw - 1), min(int(cy), gh - 1)
-        sx, sy = max(bw / 6, 0.6), max(bh / 6, 0.6)
+        sx, sy = max(bw / 6, smin), max(bh / 6, smin)
         rx, ry = math.ceil(3 * sx), math.ceil(3 * sy)
         wx0, wx1, wy0, wy1 = max(ix - rx, 0), min(ix + rx + 1, gw), max(iy - ry, 0), min(iy + ry + 1, gh)
         ys, xs = np.mgrid[wy0:wy1, wx0:wx1]
@@ -212,16 +242,16 @@ def train_forward(model, x, bf16):
 
 
 def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=print, time_budget_s=None, spread=True,
-          giou_weight=1.0):
+          giou_weight=1.0, sub=1):
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    model = FishDet().to(memory_format=torch.channels_last)
+    model = FishDet(sub=sub).to(memory_format=torch.channels_last)
     bf16 = use_bf16()
-    log(f"det: {'bf16 autocast' if bf16 else 'fp32'}, channels-last")
+    log(f"det: {'bf16 autocast' if bf16 else 'fp32'}, channels-last, output stride {model.stride}")
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     n = len(images)
     steps = epochs * math.ceil(n / batch)
-    gh, gw = images.shape[1] // STRIDE, images.shape[2] // STRIDE
+    gh, gw = images.shape[1] // model.stride, images.shape[2] // model.stride
     t0 = time.time()
     step = 0
     frac = lr_at(opt, lr, 0.0, 0.0, time_budget_s)
@@ -237,7 +267,7 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
             for j in idx:
                 im, b = augment(images[j], boxes[j], rng)
                 xs.append(im.transpose(2, 0, 1) / 255.0)
-                h, r, m = targets(b, gh, gw, min_vis, spread)
+                h, r, m = targets(b, gh, gw, min_vis, spread, model.stride)
                 hs.append(h)
                 rs.append(r)
                 ms.append(m)

@@ -40,6 +40,8 @@ def main():
                     help="train on the first N training sequences in seed order (0: all of them)")
     ap.add_argument("--depth-focus", type=float, default=depth.FOCUS_WEIGHT,
                     help="weight of the depth loss's focus term on fish and reference cubes (0: off)")
+    ap.add_argument("--det-sub", type=int, default=2,
+                    help="detector sub-cells per stride-4 cell and axis (2: heat map and boxes at stride 2)")
     ap.add_argument("--metrics", default=os.path.join(HERE, "metrics.json"))
     ap.add_argument("--skip", default="", help="comma list of stages to skip: det,depth")
     args = ap.parse_args()
@@ -74,7 +76,8 @@ def main():
 
     if "det" not in skip:
         t1 = time.time()
-        model, epochs_run = det.train(tr_images, tr_boxes, args.det_epochs, log=log, time_budget_s=args.budget_s)
+        model, epochs_run = det.train(tr_images, tr_boxes, args.det_epochs, log=log, time_budget_s=args.budget_s,
+                                      sub=args.det_sub)
         train_s = time.time() - t1
         fp32 = os.path.join(args.models, "fish_det_fp32.onnx")
         det.export(model, fp32, data.NET_H, data.NET_W)
@@ -82,6 +85,7 @@ def main():
         res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs, "epochs_run": epochs_run,
                "autocast": "bf16" if det.use_bf16() else "fp32",
                "input": [data.NET_W, data.NET_H],
+               "output_stride": model.stride,
                "data": data_info,
                "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):

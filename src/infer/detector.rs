@@ -194,7 +194,7 @@ fn check_layout(path: &Path, session: &Session, cfg: &DetectorConfig) -> Result<
         ));
     }
     // Ultralytics heads have one column per cell of strides 8/16/32; fme's own model has one per
-    // stride-4 cell. Both decode the same way, so a different count is only logged.
+    // stride-2 cell. Both decode the same way, so a different count is only logged.
     if odims[2] > 0 {
         let (w, h) = (net.0 as i64, net.1 as i64);
         let anchors: i64 = [8, 16, 32].iter().map(|s| (w / s) * (h / s)).sum();
