@@ -37,8 +37,10 @@ class Block(nn.Module):
 
 
 class FishDet(nn.Module):
+    # sub=1 is the original stride-4 head; train.py (and so train.sh) defaults to sub=2.
     def __init__(self, w=(16, 32, 64, 96, 128), fpn=64, head=32, sub=1):
         super().__init__()
+        assert STRIDE % sub == 0, f"sub must divide {STRIDE}, got {sub}"
         self.sub = sub
         self.stride = STRIDE // sub
         self.stem = conv(3, w[0], 2)
