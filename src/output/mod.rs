@@ -5,6 +5,7 @@
 
 pub mod bank;
 pub mod feeding;
+pub mod log_throttle;
 pub mod modbus;
 pub mod registers;
 pub mod serial_line;

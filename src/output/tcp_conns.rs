@@ -9,6 +9,7 @@
 //! the PLC's new connection could be refused.
 
 use super::bank::RegisterBank;
+use super::log_throttle::LogThrottle;
 use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
@@ -44,10 +45,14 @@ struct Entry {
     close: oneshot::Sender<()>,
 }
 
-#[derive(Debug, Default)]
+/// At most one eviction warning per this period; the bank counts every eviction.
+const EVICTION_LOG_PERIOD: Duration = Duration::from_secs(10);
+
+#[derive(Debug)]
 struct Table {
     next_id: u64,
     open: Vec<Entry>,
+    eviction_log: LogThrottle,
 }
 
 /// The open connections of one server. Registering a connection beyond the limit signals the least
@@ -62,7 +67,8 @@ pub struct Connections {
 impl Connections {
     /// An empty table; the bank counts open, idle-closed and evicted connections.
     pub fn new(limits: TcpLimits, bank: Arc<RegisterBank>) -> Self {
-        Self { table: Arc::new(Mutex::new(Table::default())), limits, bank }
+        let table = Table { next_id: 0, open: Vec::new(), eviction_log: LogThrottle::new(EVICTION_LOG_PERIOD) };
+        Self { table: Arc::new(Mutex::new(table)), limits, bank }
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Table> {
@@ -85,12 +91,14 @@ impl Connections {
             while t.open.len() >= self.limits.max_connections.max(1) {
                 let Some(oldest) = (0..t.open.len()).min_by_key(|&i| t.open[i].last_activity) else { break };
                 let e = t.open.swap_remove(oldest);
-                tracing::warn!(
-                    "modbus tcp: {} connections open (the limit); closing the least recently active, {} (idle {:.1} s), for {peer}",
-                    self.limits.max_connections,
-                    e.peer,
-                    now.duration_since(e.last_activity).as_secs_f64()
-                );
+                if let Some(held_back) = t.eviction_log.allow(now) {
+                    tracing::warn!(
+                        "modbus tcp: {} connections open (the limit); closing the least recently active, {} (idle {:.1} s), for {peer} ({held_back} more evictions since the last message)",
+                        self.limits.max_connections,
+                        e.peer,
+                        now.duration_since(e.last_activity).as_secs_f64()
+                    );
+                }
                 let _ = e.close.send(());
                 self.bank.note_tcp_evicted();
             }

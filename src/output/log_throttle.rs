@@ -1,0 +1,65 @@
+//! A warning that can repeat as fast as the outside world pushes it (a PLC reconnecting in a tight
+//! loop evicts a connection per attempt) is logged at most once per period, with the number held
+//! back since the last message. The journal on the box's flash is the technician's record; it must
+//! not be flooded by one misbehaving client. The exact counts stay in the register bank.
+
+use std::time::Duration;
+use tokio::time::Instant;
+
+/// At most one message per `period`; counts the events it held back.
+#[derive(Debug, Clone)]
+pub struct LogThrottle {
+    period: Duration,
+    last: Option<Instant>,
+    held_back: u64,
+}
+
+impl LogThrottle {
+    /// A throttle that lets the first event through and then at most one per `period`.
+    pub fn new(period: Duration) -> Self {
+        Self { period, last: None, held_back: 0 }
+    }
+
+    /// `Some(n)` when the event at `now` should be logged, `n` being the events held back since the
+    /// last one logged; `None` when it is held back (and counted).
+    pub fn allow(&mut self, now: Instant) -> Option<u64> {
+        match self.last {
+            Some(last) if now.saturating_duration_since(last) < self.period => {
+                self.held_back += 1;
+                None
+            }
+            _ => {
+                self.last = Some(now);
+                Some(std::mem::take(&mut self.held_back))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn first_event_passes_then_one_per_period_with_the_count_held_back() {
+        let t0 = Instant::now();
+        let s = Duration::from_secs(1);
+        let mut t = LogThrottle::new(Duration::from_secs(10));
+        assert_eq!(t.allow(t0), Some(0));
+        assert_eq!(t.allow(t0 + s), None);
+        assert_eq!(t.allow(t0 + 5 * s), None);
+        assert_eq!(t.allow(t0 + 9 * s), None);
+        assert_eq!(t.allow(t0 + 10 * s), Some(3), "three held back since the first");
+        assert_eq!(t.allow(t0 + 11 * s), None);
+        assert_eq!(t.allow(t0 + 60 * s), Some(1));
+        assert_eq!(t.allow(t0 + 100 * s), Some(0), "nothing held back after a quiet period");
+    }
+
+    #[test]
+    fn a_clock_that_steps_back_holds_back_rather_than_panics() {
+        let t0 = Instant::now() + Duration::from_secs(100);
+        let mut t = LogThrottle::new(Duration::from_secs(10));
+        assert_eq!(t.allow(t0), Some(0));
+        assert_eq!(t.allow(t0 - Duration::from_secs(50)), None);
+    }
+}
