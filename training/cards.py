@@ -23,10 +23,12 @@ def budget_note(d):
 
 
 def sub_note(st):
+    """The card's sentence for a head with sub-cells (output stride below 4)."""
     if st == 4:
         return ""
-    return (f"\nThe head's last 1x1 convolution predicts {4 // st}x{4 // st} sub-cells per stride-4 cell, so heat map and boxes\n"
-            f"come out at stride {st}: two fish one stride-4 cell apart keep two peaks.")
+    n = 4 // st
+    return (f"\nThe head's last 1x1 convolution predicts {n}x{n} sub-cells per stride-4 cell, so heat map and\n"
+            f"boxes come out at stride {st}: two fish one stride-4 cell apart keep two peaks.")
 
 
 def tail_note(d):

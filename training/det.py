@@ -122,8 +122,8 @@ REG_GAUSS_MIN = 0.4
 
 def targets(boxes, gh, gw, min_vis, spread=True, stride=STRIDE):
     """CenterNet targets for one image: heat [gh,gw], reg [4,gh,gw] (cell-relative centre offset,
-    log width, log height, in units of the output stride `stride`) and the regression weight [gh,gw] (each fish's weights
-    sum to about 1; with spread=False only its centre cell, weight 1). Each fish's Gaussian is
+    log width, log height, in units of the output stride `stride`) and the regression weight
+    [gh,gw] (each fish's weights sum to about 1; with spread=False only its centre cell, weight 1). Each fish's Gaussian is
     evaluated within 3 sigma of its centre (beyond that it is below 0.012)."""
     heat = np.zeros((gh, gw), np.float32)
     reg = np.zeros((4, gh, gw), np.float32)
