@@ -1,5 +1,6 @@
 //! Detector and depth-network latency per frame (preprocess + ONNX Runtime + decode), fp32 vs
-//! int8, 1 vs 2 intra-op threads. A benchmark, not a test: `make bench-infer` or
+//! int8, 1 vs 2 intra-op threads, idle worker threads sleeping (fme's setting: the tracker needs the
+//! core) vs spinning (lower latency, more CPU). A benchmark, not a test: `make bench-infer` or
 //! `cargo bench --bench infer`. Models: the bundled ones in models/ (FME_BENCH_MODELS names another
 //! folder with the same file names); FME_BENCH_FRAME may
 //! name a frame image (default: a synthetic 640x384 frame); FME_BENCH_RUNS sets the timed runs.
@@ -43,7 +44,7 @@ fn main() {
         img.width(),
         img.height()
     );
-    println!("{:<28} {:>7} {:>10} {:>10} {:>14}", "model", "threads", "median", "p90", "preprocess");
+    println!("{:<28} {:>7} {:>5} {:>10} {:>10} {:>14}", "model", "threads", "spin", "median", "p90", "preprocess");
     for name in ["fish_det_fp32.onnx", "fish_det_int8.onnx", "fish_depth_fp32.onnx", "fish_depth_int8.onnx"] {
         let dir = std::env::var_os("FME_BENCH_MODELS").map(PathBuf::from).unwrap_or_else(|| root.join("models"));
         let path = dir.join(name);
@@ -52,16 +53,19 @@ fn main() {
             continue;
         }
         for threads in [1, 2] {
-            match bench_one(&path, threads, runs, &f) {
-                Ok((m, p, pre)) => println!("{name:<28} {threads:>7} {m:>10.2} {p:>10.2} {pre:>14.3}"),
-                Err(e) => println!("{name:<28} {threads:>7} error: {e}"),
+            for spin in [false, true] {
+                let opts = SessionOptions { intra_threads: threads, spin };
+                let on = if spin { "on" } else { "off" };
+                match bench_one(&path, opts, runs, &f) {
+                    Ok((m, p, pre)) => println!("{name:<28} {threads:>7} {on:>5} {m:>10.2} {p:>10.2} {pre:>14.3}"),
+                    Err(e) => println!("{name:<28} {threads:>7} {on:>5} error: {e}"),
+                }
             }
         }
     }
 }
 
-fn bench_one(path: &Path, threads: usize, runs: usize, f: &RgbFrame<'_>) -> Result<(f64, f64, f64), String> {
-    let opts = SessionOptions { intra_threads: threads, spin: false };
+fn bench_one(path: &Path, opts: SessionOptions, runs: usize, f: &RgbFrame<'_>) -> Result<(f64, f64, f64), String> {
     let is_det = path.file_name().is_some_and(|n| n.to_string_lossy().contains("_det_"));
     let mut times = Vec::with_capacity(runs);
     let mut pre = Vec::with_capacity(runs);

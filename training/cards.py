@@ -40,6 +40,14 @@ def tail_note(d):
             "quality is from the first export, timings are of these files.")
 
 
+def quant_note(d):
+    """Which parts of the int8 detector stay in float."""
+    first = ""
+    if d.get("float_stem"):
+        first = "the first convolution (it reads the 3-channel image; faster in float here) and\n"
+    return f"\nIn the int8 file {first}the head's last convolution with the in-graph decode stay in float."
+
+
 def det_card(m):
     d = m["detector"]
     data = d["data"]
@@ -59,7 +67,7 @@ def det_card(m):
     return f"""# fish_det: one-class fish detector (YOLO output layout)
 
 Files: `fish_det_fp32.onnx` and `fish_det_int8.onnx` (static int8, QDQ, {d.get('int8_kept', '?')} kept:
-the faster int8 variant on this machine).
+the faster int8 variant on this machine).{quant_note(d)}
 
 ## Convention (same as an Ultralytics YOLOv8/YOLO11 detection export)
 - Input `images` float32 `[1, 3, {h}, {w}]`, RGB in 0..1, letterboxed (centred, pad 114/255).

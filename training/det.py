@@ -196,16 +196,22 @@ def loss_fn(r, heat, reg, weight, giou_weight=1.0):
     return loss
 
 
-def augment(img, boxes, rng):
-    # Horizontal flip and mild photometric jitter (the generator already varies water and light).
+def augment(img, boxes, rng, out=None):
+    """Horizontal flip and mild photometric jitter (the generator already varies water and light) of
+    an HxWx3 uint8 image: returns the float32 image (0..255), written into `out` when given, and the
+    boxes. Each step is one float32 operation rounded as `img.astype(float32) * gain + bias` was,
+    so the result is the same whether or not `out` is given."""
     if rng.random() < 0.5:
         img = img[:, ::-1]
         b = boxes.copy()
         b[:, 0] = img.shape[1] - b[:, 0] - b[:, 2]
         boxes = b
-    img = img.astype(np.float32)
-    img = img * rng.uniform(0.8, 1.2) + rng.uniform(-15, 15)
-    return np.clip(img, 0, 255), boxes
+    if out is None:
+        out = np.empty(img.shape, np.float32)
+    np.multiply(img, np.float32(rng.uniform(0.8, 1.2)), out=out)
+    np.add(out, np.float32(rng.uniform(-15, 15)), out=out)
+    np.clip(out, 0, 255, out=out)
+    return out, boxes
 
 
 def lr_at(opt, max_lr, step_frac, elapsed, budget):
@@ -265,15 +271,18 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
         tot = 0.0
         for i in range(0, n, batch):
             idx = perm[i:i + batch]
-            xs, hs, rs, ms = [], [], [], []
-            for j in idx:
-                im, b = augment(images[j], boxes[j], rng)
-                xs.append(im.transpose(2, 0, 1) / 255.0)
+            # The batch is built in place as NHWC, which is the channels-last layout the model runs
+            # in: stacking NCHW copies and converting them had cost ~25 ms of a ~460 ms step.
+            xs = np.empty((len(idx),) + images.shape[1:], np.float32)
+            hs, rs, ms = [], [], []
+            for k, j in enumerate(idx):
+                _, b = augment(images[j], boxes[j], rng, out=xs[k])
                 h, r, m = targets(b, gh, gw, min_vis, spread, model.stride)
                 hs.append(h)
                 rs.append(r)
                 ms.append(m)
-            out = train_forward(model, torch.from_numpy(np.stack(xs).astype(np.float32)), bf16)
+            xs /= 255.0
+            out = train_forward(model, torch.from_numpy(xs).permute(0, 3, 1, 2), bf16)
             loss = loss_fn(out, torch.from_numpy(np.stack(hs)), torch.from_numpy(np.stack(rs)),
                            torch.from_numpy(np.stack(ms)), giou_weight)
             opt.zero_grad()

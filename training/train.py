@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
-"""Trains, exports, quantises and evaluates fme's bundled models (see README.md in this folder).
+"""Trains, exports, quantises and evaluates fme's bundled models (README.md, "What the bundled models achieve").
 
     python train.py --data DATA_DIR --models ../models [--det-epochs N] [--depth-epochs N]
+    python train.py --data DATA_DIR --requantize [--skip depth]   # re-quantise the fp32 files only
 
 DATA_DIR/train and DATA_DIR/val hold fme sequences (made by train.sh with `fme synth`).
 Writes models/fish_det_{fp32,int8}.onnx, models/fish_depth_{fp32,int8}.onnx and
@@ -44,6 +45,9 @@ def main():
                     help="detector sub-cells per stride-4 cell and axis (2: heat map and boxes at stride 2)")
     ap.add_argument("--metrics", default=os.path.join(HERE, "metrics.json"))
     ap.add_argument("--skip", default="", help="comma list of stages to skip: det,depth")
+    ap.add_argument("--requantize", action="store_true",
+                    help="do not train: quantise and measure the fp32 files already in --models again, keeping "
+                         "their training record from --metrics")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     skip = set(filter(None, args.skip.split(",")))
@@ -59,7 +63,8 @@ def main():
     t0 = time.time()
     # Depth maps only when the depth network trains (the detector run at 288 sequences would hold ~0.3 GB).
     tr_images, tr_boxes, tr_depth, tr_seqs = data.load_many(os.path.join(args.data, "train"), every=args.every,
-                                                               with_depth="depth" not in skip, limit=args.train_seqs)
+                                                               with_depth="depth" not in skip and not args.requantize,
+                                                               limit=args.train_seqs)
     va_paths = data.list_sequences(os.path.join(args.data, "val"))
     va_images, va_boxes, _, _ = data.load_many(os.path.join(args.data, "val"), every=5, with_depth=False)
     log(f"data: {len(tr_images)} training frames from {len(tr_seqs)} sequences, {len(va_images)} held-out frames "
@@ -75,22 +80,26 @@ def main():
     calib_idx = np.random.default_rng(1).choice(len(tr_images), size=min(64, len(tr_images)), replace=False)
 
     if "det" not in skip:
-        t1 = time.time()
-        model, epochs_run = det.train(tr_images, tr_boxes, args.det_epochs, log=log, time_budget_s=args.budget_s,
-                                      sub=args.det_sub)
-        train_s = time.time() - t1
         fp32 = os.path.join(args.models, "fish_det_fp32.onnx")
-        det.export(model, fp32, data.NET_H, data.NET_W)
+        if args.requantize:
+            res = training_record(metrics, "detector", fp32, log)
+        else:
+            t1 = time.time()
+            model, epochs_run = det.train(tr_images, tr_boxes, args.det_epochs, log=log,
+                                          time_budget_s=args.budget_s, sub=args.det_sub)
+            train_s = time.time() - t1
+            det.export(model, fp32, data.NET_H, data.NET_W)
+            res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs, "epochs_run": epochs_run,
+                   "autocast": "bf16" if det.use_bf16() else "fp32",
+                   "input": [data.NET_W, data.NET_H],
+                   "output_stride": model.stride,
+                   "data": data_info,
+                   "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
         calib = [tr_images[i].astype(np.float32).transpose(2, 0, 1) / 255.0 for i in calib_idx]
-        res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs, "epochs_run": epochs_run,
-               "autocast": "bf16" if det.use_bf16() else "fp32",
-               "input": [data.NET_W, data.NET_H],
-               "output_stride": model.stride,
-               "data": data_info,
-               "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
+        res["float_stem"] = True
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             out = os.path.join(args.models, f"fish_det_int8_{tag}.onnx")
-            quant.quantize(fp32, out, calib, "images", act)
+            quant.quantize(fp32, out, calib, "images", act, float_stem=True)
         for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
             path = os.path.join(args.models, f"fish_det_{tag}.onnx")
             sess = evaluate.session(path)
@@ -109,23 +118,26 @@ def main():
         pick(args.models, "fish_det", res, log)
 
     if "depth" not in skip:
-        t1 = time.time()
-        focus = None
-        if args.depth_focus > 0:
-            tr_refs = [s["refs"] for s in tr_seqs for _ in s["frames"]]
-            focus = depth.focus_masks(tr_boxes, tr_refs, tr_depth.shape[1:], (data.NET_H, data.NET_W))
-            log(f"depth: focus term weight {args.depth_focus} on {focus.mean() * 100:.1f}% of the pixels")
-        model, epochs_run = depth.train(tr_images, tr_depth, args.depth_epochs, log=log,
-                                        time_budget_s=args.depth_budget_s or args.budget_s, focus=focus,
-                                        focus_weight=args.depth_focus)
-        train_s = time.time() - t1
         fp32 = os.path.join(args.models, "fish_depth_fp32.onnx")
-        depth.export(model, fp32, data.NET_H, data.NET_W)
+        if args.requantize:
+            res = training_record(metrics, "depth", fp32, log)
+        else:
+            t1 = time.time()
+            focus = None
+            if args.depth_focus > 0:
+                tr_refs = [s["refs"] for s in tr_seqs for _ in s["frames"]]
+                focus = depth.focus_masks(tr_boxes, tr_refs, tr_depth.shape[1:], (data.NET_H, data.NET_W))
+                log(f"depth: focus term weight {args.depth_focus} on {focus.mean() * 100:.1f}% of the pixels")
+            model, epochs_run = depth.train(tr_images, tr_depth, args.depth_epochs, log=log,
+                                            time_budget_s=args.depth_budget_s or args.budget_s, focus=focus,
+                                            focus_weight=args.depth_focus)
+            train_s = time.time() - t1
+            depth.export(model, fp32, data.NET_H, data.NET_W)
+            res = {"train_seconds": round(train_s, 1), "epochs": args.depth_epochs, "epochs_run": epochs_run,
+                   "autocast": "bf16" if det.use_bf16() else "fp32",
+                   "data": data_info,
+                   "input": [data.NET_W, data.NET_H], "focus_weight": args.depth_focus}
         calib = [depth.to_input(tr_images[i]) for i in calib_idx]
-        res = {"train_seconds": round(train_s, 1), "epochs": args.depth_epochs, "epochs_run": epochs_run,
-               "autocast": "bf16" if det.use_bf16() else "fp32",
-               "data": data_info,
-               "input": [data.NET_W, data.NET_H], "focus_weight": args.depth_focus}
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             quant.quantize(fp32, os.path.join(args.models, f"fish_depth_int8_{tag}.onnx"), calib, "image", act)
         for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
@@ -146,7 +158,8 @@ def main():
 
     metrics["torch"] = torch.__version__
     logs = metrics.get("log") if isinstance(metrics.get("log"), dict) else {}
-    logs["+".join(st for st in ("det", "depth") if st not in skip) or "none"] = log_lines
+    run = "+".join(st for st in ("det", "depth") if st not in skip) or "none"
+    logs[run + (" requantize" if args.requantize else "")] = log_lines
     metrics["log"] = logs
     with open(metrics_path, "w") as f:
         json.dump(metrics, f, indent=1)
@@ -155,6 +168,21 @@ def main():
         import cards
 
         cards.main_with(metrics)
+
+
+# What a measurement re-computes; everything else in a model's metrics is its training record.
+MEASURED_KEYS = ("fp32", "int8_u8s8", "int8_s8s8", "int8_kept", "float_stem")
+
+
+def training_record(metrics, key, fp32, log):
+    """For --requantize: the training record of the fp32 file already in place (from the metrics of
+    the run that trained it), without the measurements that are about to be repeated."""
+    if not os.path.exists(fp32):
+        raise SystemExit(f"--requantize: {fp32} does not exist (train it first)")
+    if key not in metrics or "train_seconds" not in metrics[key]:
+        raise SystemExit(f"--requantize: the metrics file has no training record for the {key} ({fp32})")
+    log(f"{key}: re-quantising {fp32} (not trained again; training record kept)")
+    return {k: v for k, v in metrics[key].items() if k not in MEASURED_KEYS}
 
 
 def seeds_of(paths):
