@@ -6,7 +6,8 @@
 //! memory. The recording is the bundled `tests/data/swarm20` (calibrated, 20 fish) and the pipeline is
 //! `fme run`'s: bundled int8 detector at 10 Hz, depth at 5 Hz, tracker, eq. 1-5 (`config/fme.toml` defaults).
 //!
-//! Environment: `FME_BENCH_REALTIME_S` (default 20), `FME_BENCH_FAST_FRAMES` (default 20000).
+//! Environment: `FME_BENCH_REALTIME_S` (default 20), `FME_BENCH_FAST_FRAMES` (default 20000),
+//! `FME_BENCH_THREADS` (both networks' intra-op threads; default the config's 1), `FME_BENCH_SPIN=1`.
 //! Run without `--bench` (as `cargo test --all-targets` does) it only smoke-runs: 3 s and 300 frames.
 
 use fme::capture::{FrameSource, RecordedSource};
@@ -42,6 +43,11 @@ fn config(seq: &Path) -> Config {
     c.output.modbus.listen = "127.0.0.1:0".into();
     c.output.rate_hz = 10.0;
     c.service.systemd_notify = false;
+    // FME_BENCH_THREADS / FME_BENCH_SPIN=1: both networks' intra-op threads and spinning (a board
+    // profile's `threads = 2`, with or without `spin`).
+    let threads = env_num("FME_BENCH_THREADS", c.detector.threads as u64) as usize;
+    let spin = env_num("FME_BENCH_SPIN", 0) == 1;
+    (c.detector.threads, c.depth.threads, c.detector.spin, c.depth.spin) = (threads, threads, spin, spin);
     c
 }
 

@@ -329,6 +329,14 @@ mod tests {
     }
 
     #[test]
+    fn spin_is_per_network_and_typed() {
+        let c = parse("[detector]\nthreads = 2\nspin = true\n").ok();
+        assert_eq!(c.as_ref().map(|c| (c.detector.spin, c.depth.spin)), Some((true, false)));
+        let e = parse("[depth]\nspin = \"yes\"\n").err();
+        assert_eq!(e.as_ref().and_then(|e| e.key()), Some("depth.spin"));
+    }
+
+    #[test]
     fn bad_enum_value_named() {
         let e = parse("[output.modbus]\nmode = \"udp\"\n").err();
         assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.modbus.mode"));

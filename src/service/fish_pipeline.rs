@@ -98,16 +98,17 @@ impl FishPipeline {
             max_candidates: 3000,
             ..infer::DetectorConfig::default()
         };
-        let opts = |threads: usize| SessionOptions { intra_threads: threads, ..SessionOptions::default() };
-        let detector =
-            Detector::open(&det_cfg, opts(cfg.detector.threads)).map_err(|e| format!("detector.model: {e}"))?;
+        let opts = |threads: usize, spin: bool| SessionOptions { intra_threads: threads, spin };
+        let detector = Detector::open(&det_cfg, opts(cfg.detector.threads, cfg.detector.spin))
+            .map_err(|e| format!("detector.model: {e}"))?;
         let depth_cfg = infer::DepthConfig {
             model: infer::runtime::resolve_model(&cfg.depth.model),
             mean: cfg.depth.mean,
             std: cfg.depth.std,
             ..infer::DepthConfig::default()
         };
-        let depth = DepthNet::open(&depth_cfg, opts(cfg.depth.threads)).map_err(|e| format!("depth.model: {e}"))?;
+        let depth = DepthNet::open(&depth_cfg, opts(cfg.depth.threads, cfg.depth.spin))
+            .map_err(|e| format!("depth.model: {e}"))?;
         let tracker_cfg = tracker_config(cfg)?;
         let camera = calibration.as_ref().map_or_else(|| fallback_camera(cfg), |c| c.camera);
         // References are kept if they fall inside the calibrated image (principal point at its centre);
