@@ -12,7 +12,7 @@ use ort::value::TensorRef;
 use super::InferError;
 use super::config::DepthConfig;
 use super::detector::resolve_size;
-use super::frame::{AxisMap, Normalize, RgbFrame, resample_into};
+use super::frame::{Normalize, Resampler, RgbFrame};
 use super::runtime::{SessionOptions, float_tensor_shape, fmt_shape, open_session};
 use crate::geometry::Pixel;
 use crate::units::Seconds;
@@ -109,8 +109,7 @@ pub struct DepthNet {
     radius: u32,
     input: Vec<f32>,
     src: Option<(u32, u32)>,
-    xs: AxisMap,
-    ys: AxisMap,
+    resampler: Resampler,
     map: RelDepthMap,
 }
 
@@ -136,8 +135,7 @@ impl DepthNet {
             radius: cfg.sample_radius,
             input: vec![0.0; 3 * plane],
             src: None,
-            xs: AxisMap::default(),
-            ys: AxisMap::default(),
+            resampler: Resampler::default(),
             map: RelDepthMap { t: Seconds(0.0), width: 1, height: 1, src: (1, 1), radius: 0, data: Vec::new() },
         })
     }
@@ -165,12 +163,11 @@ impl DepthNet {
     pub fn preprocess(&mut self, frame: &RgbFrame<'_>) {
         let src = (frame.width(), frame.height());
         if self.src != Some(src) {
-            self.xs.build(src.0, self.net.0);
-            self.ys.build(src.1, self.net.1);
+            self.resampler.build(src, self.net);
             self.src = Some(src);
         }
         let (w, h) = (self.net.0 as usize, self.net.1 as usize);
-        resample_into(frame, &self.xs, &self.ys, 0, 0, w, h, &self.norm, &mut self.input);
+        self.resampler.run(frame, 0, 0, w, h, &self.norm, &mut self.input);
     }
 
     /// Runs the network on one frame taken at `t`; the returned map is reused by the next call.

@@ -10,7 +10,7 @@ use ort::value::TensorRef;
 use super::InferError;
 use super::config::DetectorConfig;
 use super::decode::{Detection, clip_to_frame, decode_yolo, nms};
-use super::frame::{AxisMap, Normalize, RgbFrame, resample_into};
+use super::frame::{Normalize, Resampler, RgbFrame};
 use super::letterbox::{Letterbox, PAD_VALUE};
 use super::runtime::{SessionOptions, float_tensor_shape, fmt_shape, open_session};
 use crate::units::Seconds;
@@ -33,8 +33,7 @@ pub struct Detector {
     nc: usize,
     input: Vec<f32>,
     letterbox: Option<Letterbox>,
-    xs: AxisMap,
-    ys: AxisMap,
+    resampler: Resampler,
     dets: Vec<Detection>,
 }
 
@@ -60,8 +59,7 @@ impl Detector {
             nc,
             input: vec![PAD_VALUE as f32 / 255.0; 3 * plane],
             letterbox: None,
-            xs: AxisMap::default(),
-            ys: AxisMap::default(),
+            resampler: Resampler::default(),
             dets: Vec::with_capacity(cfg.max_candidates.min(1 << 16)),
         })
     }
@@ -92,8 +90,7 @@ impl Detector {
             _ => {
                 // New frame size: rebuild the resize tables and repaint the padding once.
                 let lb = Letterbox::new(src, self.net);
-                self.xs.build(src.0, lb.inner.0);
-                self.ys.build(src.1, lb.inner.1);
+                self.resampler.build(src, lb.inner);
                 self.input.fill(PAD_VALUE as f32 / 255.0);
                 self.letterbox = Some(lb);
                 lb
@@ -101,7 +98,7 @@ impl Detector {
         };
         let (w, h) = (self.net.0 as usize, self.net.1 as usize);
         let (l, t) = (lb.pad.0 as usize, lb.pad.1 as usize);
-        resample_into(frame, &self.xs, &self.ys, l, t, w, h, &Normalize::UNIT, &mut self.input);
+        self.resampler.run(frame, l, t, w, h, &Normalize::UNIT, &mut self.input);
         lb
     }
 

@@ -86,42 +86,99 @@ impl Normalize {
     pub const IMAGENET: Normalize = Normalize { mean: [0.485, 0.456, 0.406], std: [0.229, 0.224, 0.225] };
 }
 
-/// Bilinearly resamples `frame` into the rectangle `[left, left+xs.len()) x [top, top+ys.len())` of
-/// a planar `[3, net_h, net_w]` float buffer, normalised with `norm`. Pixels outside the rectangle
-/// are left untouched (the caller fills padding once).
-#[allow(clippy::too_many_arguments)] // a hot inner loop; a struct would only rename these
-pub(crate) fn resample_into(
-    frame: &RgbFrame<'_>,
-    xs: &AxisMap,
-    ys: &AxisMap,
-    left: usize,
-    top: usize,
-    net_w: usize,
-    net_h: usize,
-    norm: &Normalize,
-    out: &mut [f32],
-) {
-    let plane = net_w * net_h;
-    let stride = frame.width as usize * 3;
-    let data = frame.data;
-    // Fold /255, mean and std into one multiply-add per channel.
-    let mul: [f32; 3] = core::array::from_fn(|c| 1.0 / (255.0 * norm.std[c]));
-    let add: [f32; 3] = core::array::from_fn(|c| -norm.mean[c] / norm.std[c]);
-    for (dy, ((&y0, &y1), &wy)) in ys.i0.iter().zip(&ys.i1).zip(&ys.w1).enumerate() {
-        let r0 = &data[y0 as usize * stride..][..stride];
-        let r1 = &data[y1 as usize * stride..][..stride];
-        let row = (top + dy) * net_w + left;
-        for (dx, ((&x0, &x1), &wx)) in xs.i0.iter().zip(&xs.i1).zip(&xs.w1).enumerate() {
-            let (a, b) = (x0 as usize * 3, x1 as usize * 3);
-            for c in 0..3 {
-                let top_v = r0[a + c] as f32 + (r0[b + c] as f32 - r0[a + c] as f32) * wx;
-                let bot_v = r1[a + c] as f32 + (r1[b + c] as f32 - r1[a + c] as f32) * wx;
-                let v = top_v + (bot_v - top_v) * wy;
-                out[c * plane + row + dx] = v * mul[c] + add[c];
+/// The bilinear resampler of one network input: the axis tables for the current frame size and two
+/// rows of horizontally resampled source pixels, all reused from frame to frame.
+///
+/// Separable: each source row an output row needs is resampled horizontally once, into one of the
+/// two row buffers, and kept while the next output row needs it too (when shrinking 384 -> 288
+/// rows, 4 output rows use 5 source rows instead of 8). The arithmetic is the direct bilinear form's,
+/// operation for operation, so the output is bit-identical to it (tested against it below).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Resampler {
+    xs: AxisMap,
+    ys: AxisMap,
+    rows: [Vec<f32>; 2],
+    /// Source row held in each buffer during one call (`u32::MAX`: none).
+    held: [u32; 2],
+}
+
+impl Resampler {
+    /// Rebuilds the tables for a `src` frame resampled to a `dst` rectangle (both `(width, height)`).
+    pub(crate) fn build(&mut self, src: (u32, u32), dst: (u32, u32)) {
+        self.xs.build(src.0, dst.0);
+        self.ys.build(src.1, dst.1);
+    }
+
+    /// Bilinearly resamples `frame` into the rectangle `[left, left + dst width) x [top, top + dst
+    /// height)` of a planar `[3, net_h, net_w]` float buffer, normalised with `norm`. Pixels outside
+    /// the rectangle are left untouched (the caller fills padding once). [`Self::build`] must have
+    /// been called for this frame size.
+    #[allow(clippy::too_many_arguments)] // a hot loop's geometry; a struct would only rename these
+    pub(crate) fn run(
+        &mut self,
+        frame: &RgbFrame<'_>,
+        left: usize,
+        top: usize,
+        net_w: usize,
+        net_h: usize,
+        norm: &Normalize,
+        out: &mut [f32],
+    ) {
+        let plane = net_w * net_h;
+        let n = self.xs.i0.len();
+        debug_assert!(top + self.ys.i0.len() <= net_h && left + n <= net_w);
+        // Fold /255, mean and std into one multiply-add per channel.
+        let mul: [f32; 3] = core::array::from_fn(|c| 1.0 / (255.0 * norm.std[c]));
+        let add: [f32; 3] = core::array::from_fn(|c| -norm.mean[c] / norm.std[c]);
+        let (p0, rest) = out.split_at_mut(plane);
+        let (p1, p2) = rest.split_at_mut(plane);
+        self.held = [u32::MAX; 2]; // a new frame: nothing held is valid
+        for dy in 0..self.ys.i0.len() {
+            let (y0, y1, wy) = (self.ys.i0[dy], self.ys.i1[dy], self.ys.w1[dy]);
+            let (b0, b1) = self.hold_pair(frame, y0, y1);
+            let (h0, h1) = (&self.rows[b0], &self.rows[b1]);
+            let row = (top + dy) * net_w + left;
+            let (o0, o1, o2) = (&mut p0[row..row + n], &mut p1[row..row + n], &mut p2[row..row + n]);
+            let px = h0.chunks_exact(3).zip(h1.chunks_exact(3));
+            for ((((t, b), o0), o1), o2) in px.zip(o0.iter_mut()).zip(o1.iter_mut()).zip(o2.iter_mut()) {
+                *o0 = (t[0] + (b[0] - t[0]) * wy) * mul[0] + add[0];
+                *o1 = (t[1] + (b[1] - t[1]) * wy) * mul[1] + add[1];
+                *o2 = (t[2] + (b[2] - t[2]) * wy) * mul[2] + add[2];
             }
         }
     }
-    debug_assert!(top + ys.i0.len() <= net_h);
+
+    /// The buffers holding source rows `y0` and `y1` (the same one when equal), resampling only
+    /// the rows not already held.
+    fn hold_pair(&mut self, frame: &RgbFrame<'_>, y0: u32, y1: u32) -> (usize, usize) {
+        let find = |held: &[u32; 2], y: u32| held.iter().position(|&h| h == y);
+        match (find(&self.held, y0), find(&self.held, y1)) {
+            (Some(a), Some(b)) => (a, b),
+            (Some(a), None) => (a, self.fill(1 - a, frame, y1)),
+            (None, Some(b)) => (self.fill(1 - b, frame, y0), b),
+            (None, None) => {
+                let a = self.fill(0, frame, y0);
+                (a, if y1 == y0 { a } else { self.fill(1, frame, y1) })
+            }
+        }
+    }
+
+    /// Resamples source row `y` horizontally into buffer `slot` (interleaved RGB floats).
+    fn fill(&mut self, slot: usize, frame: &RgbFrame<'_>, y: u32) -> usize {
+        let stride = frame.width as usize * 3;
+        let src = &frame.data[y as usize * stride..][..stride];
+        let buf = &mut self.rows[slot];
+        buf.resize(self.xs.i0.len() * 3, 0.0); // allocates on the first frame of a size only
+        let taps = self.xs.i0.iter().zip(&self.xs.i1).zip(&self.xs.w1);
+        for (px, ((&x0, &x1), &wx)) in buf.chunks_exact_mut(3).zip(taps) {
+            let (a, b) = (&src[x0 as usize * 3..][..3], &src[x1 as usize * 3..][..3]);
+            for c in 0..3 {
+                px[c] = a[c] as f32 + (b[c] as f32 - a[c] as f32) * wx;
+            }
+        }
+        self.held[slot] = y;
+        slot
+    }
 }
 
 #[cfg(test)]
@@ -150,12 +207,95 @@ mod tests {
     fn resample_normalises() {
         let data = [255u8, 0, 51, 255, 0, 51];
         let f = RgbFrame::new(2, 1, &data).unwrap();
-        let (mut xs, mut ys) = (AxisMap::default(), AxisMap::default());
-        xs.build(2, 2);
-        ys.build(1, 1);
+        let mut r = Resampler::default();
+        r.build((2, 1), (2, 1));
         let mut out = vec![9.0f32; 3 * 2];
-        resample_into(&f, &xs, &ys, 0, 0, 2, 1, &Normalize::UNIT, &mut out);
+        r.run(&f, 0, 0, 2, 1, &Normalize::UNIT, &mut out);
         let want = [1.0, 1.0, 0.0, 0.0, 0.2, 0.2];
         assert!(out.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-6), "{out:?}");
+    }
+
+    /// The direct bilinear form the separable [`Resampler`] must reproduce bit for bit.
+    #[allow(clippy::too_many_arguments)]
+    fn reference(
+        frame: &RgbFrame<'_>,
+        xs: &AxisMap,
+        ys: &AxisMap,
+        left: usize,
+        top: usize,
+        net_w: usize,
+        net_h: usize,
+        norm: &Normalize,
+        out: &mut [f32],
+    ) {
+        let plane = net_w * net_h;
+        let stride = frame.width as usize * 3;
+        let data = frame.data;
+        let mul: [f32; 3] = core::array::from_fn(|c| 1.0 / (255.0 * norm.std[c]));
+        let add: [f32; 3] = core::array::from_fn(|c| -norm.mean[c] / norm.std[c]);
+        for (dy, ((&y0, &y1), &wy)) in ys.i0.iter().zip(&ys.i1).zip(&ys.w1).enumerate() {
+            let r0 = &data[y0 as usize * stride..][..stride];
+            let r1 = &data[y1 as usize * stride..][..stride];
+            let row = (top + dy) * net_w + left;
+            for (dx, ((&x0, &x1), &wx)) in xs.i0.iter().zip(&xs.i1).zip(&xs.w1).enumerate() {
+                let (a, b) = (x0 as usize * 3, x1 as usize * 3);
+                for c in 0..3 {
+                    let top_v = r0[a + c] as f32 + (r0[b + c] as f32 - r0[a + c] as f32) * wx;
+                    let bot_v = r1[a + c] as f32 + (r1[b + c] as f32 - r1[a + c] as f32) * wx;
+                    let v = top_v + (bot_v - top_v) * wy;
+                    out[c * plane + row + dx] = v * mul[c] + add[c];
+                }
+            }
+        }
+        assert!(top + ys.i0.len() <= net_h);
+    }
+
+    /// Pseudo-random bytes (xorshift), so the test needs no crate.
+    fn noise(n: usize, seed: u64) -> Vec<u8> {
+        let mut x = seed | 1;
+        (0..n)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                (x >> 24) as u8
+            })
+            .collect()
+    }
+
+    #[test]
+    fn separable_resampler_is_bit_identical_to_the_direct_form() {
+        // (source, destination rectangle, offset in a net) for shrinking (the cameras' case),
+        // enlarging, equal size, odd ratios, and the letterbox offsets.
+        let cases = [
+            ((640, 384), (480, 288), (0, 0), (480, 288)),
+            ((640, 480), (384, 288), (48, 0), (480, 288)),
+            ((1920, 1080), (480, 270), (0, 9), (480, 288)),
+            ((64, 40), (480, 300), (0, 0), (480, 300)),
+            ((97, 53), (97, 53), (0, 0), (97, 53)),
+            ((33, 71), (50, 17), (3, 2), (60, 20)),
+            ((1, 1), (5, 3), (0, 0), (5, 3)),
+        ];
+        let mut r = Resampler::default();
+        for (k, &(src, dst, (left, top), (nw, nh))) in cases.iter().enumerate() {
+            r.build(src, dst);
+            let (mut xs, mut ys) = (AxisMap::default(), AxisMap::default());
+            xs.build(src.0, dst.0);
+            ys.build(src.1, dst.1);
+            // Two frames per size through the same resampler: rows held from the first frame must
+            // not leak into the second.
+            for seed in [k as u64 + 1, k as u64 + 100] {
+                let data = noise(src.0 as usize * src.1 as usize * 3, seed);
+                let f = RgbFrame::new(src.0, src.1, &data).unwrap();
+                for norm in [Normalize::UNIT, Normalize::IMAGENET] {
+                    let mut want = vec![-7.0f32; 3 * nw * nh];
+                    let mut got = want.clone();
+                    reference(&f, &xs, &ys, left, top, nw, nh, &norm, &mut want);
+                    r.run(&f, left, top, nw, nh, &norm, &mut got);
+                    let same = want.iter().zip(&got).all(|(a, b)| a.to_bits() == b.to_bits());
+                    assert!(same, "case {k} seed {seed}: separable output differs from the direct form");
+                }
+            }
+        }
     }
 }
