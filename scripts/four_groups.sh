@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The paper's four groups (Tables 6 and 7) with fme's bundled models, on held-out sequences (seeds
-# never used for training: training uses 1000..1287, its held-out check 9000..9013):
+# never used for training: training uses 1000..1575 (the depth network 1000..1287), its held-out check 9000..9013):
 #   A  GT boxes + GT depth          B  GT boxes + estimated depth (depth network + robust fit, layout F)
 #   C  predicted boxes + GT depth   D  predicted boxes + estimated depth (detector + tracker + depth network)
 # on single-fish and swarm sequences (30 s each). Prints a table; JSON per run in OUT/results-SEED_BASE.
