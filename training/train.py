@@ -156,7 +156,8 @@ def main():
         metrics["depth"] = res
         pick(args.models, "fish_depth", res, log)
 
-    metrics["torch"] = torch.__version__
+    if not args.requantize or "torch" not in metrics:  # the training run's torch, not a re-quantisation's
+        metrics["torch"] = torch.__version__
     logs = metrics.get("log") if isinstance(metrics.get("log"), dict) else {}
     run = "+".join(st for st in ("det", "depth") if st not in skip) or "none"
     logs[run + (" requantize" if args.requantize else "")] = log_lines

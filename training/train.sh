@@ -20,7 +20,7 @@ ROOT=$(cd "$HERE/.." && pwd)
 VENV=${VENV:-/tmp/venv-infer}
 DATA=${DATA:-/tmp/fme-train-data}
 # 20 epochs over 576 sequences (2,311 s here; the same number of steps as 40 over 288): held-out
-# recall at conf 0.3 0.929 (24 epochs over 288) -> 0.939 (40 over 288) -> 0.948.
+# recall at conf 0.3 0.929 (24 epochs over 288) -> 0.939 (40 over 288) -> 0.947.
 DET_EPOCHS=${DET_EPOCHS:-20}
 # Detector sub-cells per stride-4 cell and axis: 2 puts heat map and boxes at stride 2 (held-out recall
 # 0.903 -> 0.928 at the same precision; fish one stride-4 cell apart had merged into one peak).
@@ -36,7 +36,7 @@ NICE=${NICE:-10}
 FRAMES=${FRAMES:-24}
 TRAIN_SEQS=${TRAIN_SEQS:-576}
 # The detector over-fitted 72 sequences (held-out P/R 0.88/0.80 against 0.98/0.93 on its training
-# sequences), so it saw four times as many scenes, and now eight (576: held-out recall 0.939 -> 0.948
+# sequences), so it saw four times as many scenes, and now eight (576: held-out recall 0.939 -> 0.947
 # at the same number of steps). The depth network trains on the first 288 (the bundled one did; its
 # run is time-boxed, so more scenes would mean fewer passes over each).
 DET_SEQS=${DET_SEQS:-$TRAIN_SEQS}
