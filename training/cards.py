@@ -31,15 +31,6 @@ def sub_note(st):
             f"boxes come out at stride {st}: two fish one stride-4 cell apart keep two peaks.")
 
 
-def tail_note(d):
-    """The card's sentence for a model whose decode tail was re-exported after training."""
-    if "decode_tail" not in d:
-        return ""
-    return ("\nThe bundled files' in-graph decode was re-exported after training (same weights, identical\n"
-            "boxes and scores, columns in another order) and re-quantised with the same calibration frames:\n"
-            "quality is from the first export, timings are of these files.")
-
-
 def quant_note(d):
     """Which parts of the int8 detector stay in float."""
     first = ""
@@ -92,7 +83,7 @@ layouts A to F, 640x384): training seeds {data.get('train_seeds')} ({data['train
 ## Training
 `bash training/train.sh` (or `make -C training all`): CPU, torch {m.get('torch', '2.15.0')}, AdamW, one-cycle LR,
 batch 16, {d['epochs']} epochs requested{stopped}, fixed seeds. Training time on this 2-core machine (shared):
-{d['train_seconds']:.0f} s{autocast_note(d)}.{tail_note(d)}
+{d['train_seconds']:.0f} s{autocast_note(d)}.
 
 ## Quality on the held-out sequences
 Precision / recall at IoU 0.5 against the ground-truth boxes clipped to the frame; boxes with

@@ -196,22 +196,20 @@ def loss_fn(r, heat, reg, weight, giou_weight=1.0):
     return loss
 
 
-def augment(img, boxes, rng, out=None):
+def augment(img, boxes, rng, out):
     """Horizontal flip and mild photometric jitter (the generator already varies water and light) of
-    an HxWx3 uint8 image: returns the float32 image (0..255), written into `out` when given, and the
-    boxes. Each step is one float32 operation rounded as `img.astype(float32) * gain + bias` was,
-    so the result is the same whether or not `out` is given."""
+    an HxWx3 uint8 image, written as float32 (0..255) into `out`; returns the boxes. Each step is one
+    float32 operation, rounded as `img.astype(float32) * gain + bias` was before batches were built
+    in place."""
     if rng.random() < 0.5:
         img = img[:, ::-1]
         b = boxes.copy()
         b[:, 0] = img.shape[1] - b[:, 0] - b[:, 2]
         boxes = b
-    if out is None:
-        out = np.empty(img.shape, np.float32)
     np.multiply(img, np.float32(rng.uniform(0.8, 1.2)), out=out)
     np.add(out, np.float32(rng.uniform(-15, 15)), out=out)
     np.clip(out, 0, 255, out=out)
-    return out, boxes
+    return boxes
 
 
 def lr_at(opt, max_lr, step_frac, elapsed, budget):
@@ -276,7 +274,7 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
             xs = np.empty((len(idx),) + images.shape[1:], np.float32)
             hs, rs, ms = [], [], []
             for k, j in enumerate(idx):
-                _, b = augment(images[j], boxes[j], rng, out=xs[k])
+                b = augment(images[j], boxes[j], rng, xs[k])
                 h, r, m = targets(b, gh, gw, min_vis, spread, model.stride)
                 hs.append(h)
                 rs.append(r)
