@@ -311,6 +311,61 @@ fn cli_json_series_and_plot() {
 }
 
 #[test]
+fn cli_tracks_rows_follow_each_fish() {
+    // `--tracks`: one row per fish and frame, with the box centre, the depth the speed used and the
+    // fish's speed; with ground-truth depth these are the fish's own camera depth and speed.
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("seq");
+    write_sequence(&dir);
+    let tracks = tmp.path().join("t.csv");
+    let out = fme().args(["eval", "--json", "--sequence"]).arg(&dir).arg("--tracks").arg(&tracks).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = std::fs::read_to_string(&tracks).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some("frame,t,id,u,v,w,h,depth_raw_m,depth_m,speed_mps"));
+    let cam = camera();
+    let mut rows = 0;
+    for line in lines {
+        let f: Vec<&str> = line.split(',').collect();
+        assert_eq!(f.len(), 10, "{line}");
+        let (frame, t, id): (u32, f64, u32) = (f[0].parse().unwrap(), f[1].parse().unwrap(), f[2].parse().unwrap());
+        assert!((t - f64::from(frame - 1) / FPS).abs() < 1e-9, "{line}");
+        let (p, v) = fish(id - 1, t);
+        let px = cam.world_to_pixel(&p).unwrap();
+        let (u, vv): (f64, f64) = (f[3].parse().unwrap(), f[4].parse().unwrap());
+        assert!((u - px.u).abs() < 0.01 && (vv - px.v).abs() < 0.01, "centre of fish {id} at frame {frame}: {line}");
+        let z = cam.pose.to_camera(&p).depth().0;
+        let (raw, depth): (f64, f64) = (f[7].parse().unwrap(), f[8].parse().unwrap());
+        assert!((depth - z).abs() < 2e-3 && (raw - depth).abs() < 1e-9, "depth of fish {id} at frame {frame}: {line}");
+        if frame == 1 {
+            assert_eq!(f[9], "", "no speed before a second position: {line}");
+        } else {
+            let s: f64 = f[9].parse().unwrap();
+            assert!((s - v.norm()).abs() < 0.01, "speed of fish {id} at frame {frame}: {s} vs {}", v.norm());
+        }
+        rows += 1;
+    }
+    assert_eq!(rows, 3 * N, "three fish in every frame");
+    // An output that cannot be created is an error that names it, raised before the evaluation:
+    // the missing depth model (which the evaluation would open first) is not what it reports.
+    for flag in ["--tracks", "--series", "--plot"] {
+        let bad = tmp.path().join("no-such-dir").join("out");
+        let out = fme()
+            .args(["eval", "--depth", "model", "--depth-model"])
+            .arg(tmp.path().join("missing.onnx"))
+            .arg("--sequence")
+            .arg(&dir)
+            .arg(flag)
+            .arg(&bad)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains("no-such-dir/out"), "{flag}: {err}");
+        assert!(!err.contains("missing.onnx") && out.stdout.is_empty(), "{flag}: evaluated before failing: {err}");
+    }
+}
+
+#[test]
 fn a_reader_that_closes_the_pipe_early_is_not_an_error() {
     // `fme eval ... | head -1`: the report meets a closed pipe; eval must not panic (println! did).
     let tmp = tempfile::tempdir().unwrap();

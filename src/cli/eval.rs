@@ -2,6 +2,7 @@
 
 use crate::eval::{
     BoxesChoice, DepthChoice, DepthSample, EvalOptions, EvalReport, FitChoice, evaluate, plot, write_series,
+    write_tracks,
 };
 use crate::motion::SpeedMethod;
 use crate::postprocess::{BoxAnchor, PostprocessConfig};
@@ -38,6 +39,11 @@ pub struct EvalArgs {
     /// Write the per-frame series (`frame,t,true_mps,est_mps,n_fish`) as CSV.
     #[arg(long, value_name = "FILE.csv")]
     pub series: Option<PathBuf>,
+    /// Write one row per tracked fish and frame (`frame,t,id,u,v,w,h,depth_raw_m,depth_m,speed_mps`:
+    /// box centre and size in pixels after eq. 3, depth before and after eq. 4 and the smoothing) as
+    /// CSV, for diagnosing the speed error fish by fish.
+    #[arg(long, value_name = "FILE.csv")]
+    pub tracks: Option<PathBuf>,
     /// Speed span in seconds (0 = frame to frame, the paper's choice; default 1).
     #[arg(long)]
     pub speed_span: Option<f64>,
@@ -224,7 +230,15 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     opts.relative.pixel_noise = args.rel_noise;
     opts.relative.low_freq = args.rel_distortion;
     opts.relative.seed = seq.meta.seed ^ 0x5eed;
+    opts.track_rows = args.tracks.is_some();
+    // An output that cannot be created fails now, not after minutes of evaluation.
+    for p in [&args.tracks, &args.series, &args.plot].into_iter().flatten() {
+        std::fs::File::create(p).with_context(|| format!("{}: cannot create this output", p.display()))?;
+    }
     let report = evaluate(&seq, &opts)?;
+    if let Some(p) = &args.tracks {
+        write_tracks(p, &report.tracks)?;
+    }
     if let Some(p) = &args.series {
         write_series(p, &report.series)?;
     }

@@ -86,6 +86,8 @@ pub struct EvalOptions {
     pub tracker: TrackerConfig,
     /// Seed of the synthetic detections of `--boxes tracker` (when the sequence has no det/det.txt).
     pub det_seed: u64,
+    /// Collect one [`TrackRow`] per fish and frame into [`EvalReport::tracks`] (`--tracks`).
+    pub track_rows: bool,
 }
 
 impl Default for EvalOptions {
@@ -106,6 +108,7 @@ impl Default for EvalOptions {
             threads: 2,
             tracker: TrackerConfig::default_preset(),
             det_seed: 1,
+            track_rows: false,
         }
     }
 }
@@ -128,6 +131,28 @@ pub struct SeriesRow {
     pub est_raw_mps: Option<f64>,
     /// Fish in the estimated mean.
     pub n_fish: usize,
+}
+
+/// One tracked fish in one frame, as the estimator saw it (`--tracks`): what separates the speed
+/// error into its lateral part (box motion at the fitted depth) and its along-ray part (depth change).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackRow {
+    /// 1-based frame number.
+    pub frame: u32,
+    /// Timestamp, seconds.
+    pub t: f64,
+    /// Track id (ground-truth id with `--boxes gt`).
+    pub id: u32,
+    /// Centre of the box after eq. 3, pixels.
+    pub centre: Pixel,
+    /// Width and height of that box, pixels.
+    pub size: (f64, f64),
+    /// Depth as sampled and fitted, before eq. 4 and the depth smoothing, metres.
+    pub depth_raw_m: Option<f64>,
+    /// Depth the speed used (after eq. 4 and the smoothing), metres.
+    pub depth_m: Option<f64>,
+    /// The fish's speed at this frame, m/s.
+    pub speed_mps: Option<f64>,
 }
 
 /// The scores of one evaluation (`--json` prints this).
@@ -213,6 +238,9 @@ pub struct EvalReport {
     /// Per-frame series (written by `--series`, not part of the JSON).
     #[serde(skip)]
     pub series: Vec<SeriesRow>,
+    /// Per-fish rows (collected with [`EvalOptions::track_rows`], written by `--tracks`).
+    #[serde(skip)]
+    pub tracks: Vec<TrackRow>,
 }
 
 /// MOT metrics of the tracked boxes (MOTChallenge conventions, IoU 0.5).
@@ -366,6 +394,7 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
     let (mut boxes_corrected, mut depths_corrected) = (0u64, 0u64);
     let mut series = Vec::with_capacity(seq.len() as usize);
     let mut latencies = Vec::with_capacity(seq.len() as usize);
+    let (mut tracks, mut raw_depths) = (Vec::new(), Vec::new());
     let radius = opts.window_radius;
     for frame in 1..=seq.len() {
         let t = seq.timestamp(frame);
@@ -459,7 +488,27 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
                 }
             }
         }
-        let s = est.update_with(t, &obs, &depth_at);
+        raw_depths.clear();
+        let s = est.update_with(t, &obs, |o: &TrackObservation, px: Pixel| {
+            let d = depth_at(o, px);
+            if opts.track_rows {
+                raw_depths.push((o.id, d));
+            }
+            d
+        });
+        if opts.track_rows {
+            let raw = |id: u32| raw_depths.iter().find(|r| r.0 == id).and_then(|r| r.1).map(|d| d.0);
+            tracks.extend(est.tracks().filter(|v| v.last_seen == t).map(|v| TrackRow {
+                frame,
+                t: t.0,
+                id: v.id,
+                centre: v.bbox.center(),
+                size: (v.bbox.w, v.bbox.h),
+                depth_raw_m: raw(v.id),
+                depth_m: v.depth.map(|d| d.0),
+                speed_mps: v.speed.map(|s| s.0),
+            }));
+        }
         let s_raw = est_raw.update_with(t, &obs, &depth_at);
         boxes_corrected += u64::from(s.boxes_corrected);
         depths_corrected += u64::from(s.depths_corrected);
@@ -548,18 +597,56 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         mot,
         detection,
         series,
+        tracks,
     })
+}
+
+/// Writes a CSV file: `header`, then one line per item from `line` (empty field where a value is
+/// missing: [`csv_opt`]). Errors name the file.
+fn write_csv<T>(
+    path: &Path,
+    header: &str,
+    items: &[T],
+    mut line: impl FnMut(&mut dyn Write, &T) -> std::io::Result<()>,
+) -> Result<(), EvalError> {
+    let err = |e: std::io::Error| EvalError::Output { path: path.to_path_buf(), msg: e.to_string() };
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path).map_err(err)?);
+    writeln!(out, "{header}").map_err(err)?;
+    for item in items {
+        line(&mut out, item).map_err(err)?;
+    }
+    out.flush().map_err(err)
+}
+
+fn csv_opt(v: Option<f64>) -> String {
+    v.map_or(String::new(), |x| format!("{x}"))
 }
 
 /// Writes the per-frame series as CSV with header `frame,t,true_mps,est_mps,n_fish` (empty field
 /// where a value is missing).
 pub fn write_series(path: &Path, series: &[SeriesRow]) -> Result<(), EvalError> {
-    let err = |e: std::io::Error| EvalError::Output { path: path.to_path_buf(), msg: e.to_string() };
-    let mut out = std::io::BufWriter::new(std::fs::File::create(path).map_err(err)?);
-    let opt = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x}"));
-    writeln!(out, "frame,t,true_mps,est_mps,n_fish").map_err(err)?;
-    for r in series {
-        writeln!(out, "{},{},{},{},{}", r.frame, r.t, opt(r.true_mps), opt(r.est_mps), r.n_fish).map_err(err)?;
-    }
-    out.flush().map_err(err)
+    write_csv(path, "frame,t,true_mps,est_mps,n_fish", series, |out, r| {
+        writeln!(out, "{},{},{},{},{}", r.frame, r.t, csv_opt(r.true_mps), csv_opt(r.est_mps), r.n_fish)
+    })
+}
+
+/// Writes the per-fish rows as CSV with header `frame,t,id,u,v,w,h,depth_raw_m,depth_m,speed_mps`
+/// (empty field where a value is missing).
+pub fn write_tracks(path: &Path, rows: &[TrackRow]) -> Result<(), EvalError> {
+    write_csv(path, "frame,t,id,u,v,w,h,depth_raw_m,depth_m,speed_mps", rows, |out, r| {
+        writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{}",
+            r.frame,
+            r.t,
+            r.id,
+            r.centre.u,
+            r.centre.v,
+            r.size.0,
+            r.size.1,
+            csv_opt(r.depth_raw_m),
+            csv_opt(r.depth_m),
+            csv_opt(r.speed_mps)
+        )
+    })
 }

@@ -15,7 +15,8 @@ pub mod relative;
 
 pub use boxes::{BoxProvider, BoxesChoice, IndexedBoxes};
 pub use driver::{
-    DepthChoice, DepthSample, EvalOptions, EvalReport, FitChoice, MotSummary, SeriesRow, evaluate, write_series,
+    DepthChoice, DepthSample, EvalOptions, EvalReport, FitChoice, MotSummary, SeriesRow, TrackRow, evaluate,
+    write_series, write_tracks,
 };
 pub use metrics::{DepthAccuracy, distance_correlation, quantile, rmse};
 pub use relative::RelativeGtParams;
