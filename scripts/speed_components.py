@@ -28,6 +28,8 @@ def main():
     cam = meta["camera"]
     rot, tr = cam["world_to_camera"]["rotation"], cam["world_to_camera"]["translation"]
     fx, fy, cx, cy, fps = cam["fx"], cam["fy"], cam["cx"], cam["cy"], meta["fps"]
+    if any(cam.get("distortion", [])):
+        sys.exit(f"{seq}/meta.json: the camera has lens distortion {cam['distortion']}; this script assumes none")
 
     true_z, speeds = {}, {}
     for r in csv.DictReader(open(f"{seq}/gt/world.csv")):

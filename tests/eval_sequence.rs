@@ -363,6 +363,25 @@ fn cli_tracks_rows_follow_each_fish() {
         assert!(!out.status.success() && err.contains("no-such-dir/out"), "{flag}: {err}");
         assert!(!err.contains("missing.onnx") && out.stdout.is_empty(), "{flag}: evaluated before failing: {err}");
     }
+    // When the evaluation itself fails, an existing output keeps its contents and a new one is not
+    // left behind.
+    let (old, new) = (tmp.path().join("old.csv"), tmp.path().join("new.csv"));
+    std::fs::write(&old, "keep\n").unwrap();
+    let out = fme()
+        .args(["eval", "--depth", "model", "--depth-model"])
+        .arg(tmp.path().join("missing.onnx"))
+        .arg("--sequence")
+        .arg(&dir)
+        .arg("--series")
+        .arg(&old)
+        .arg("--tracks")
+        .arg(&new)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("missing.onnx"), "{err}");
+    assert_eq!(std::fs::read_to_string(&old).unwrap(), "keep\n");
+    assert!(!new.exists(), "a failed evaluation left {} behind", new.display());
 }
 
 #[test]

@@ -231,11 +231,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     opts.relative.low_freq = args.rel_distortion;
     opts.relative.seed = seq.meta.seed ^ 0x5eed;
     opts.track_rows = args.tracks.is_some();
-    // An output that cannot be created fails now, not after minutes of evaluation.
-    for p in [&args.tracks, &args.series, &args.plot].into_iter().flatten() {
-        std::fs::File::create(p).with_context(|| format!("{}: cannot create this output", p.display()))?;
-    }
-    let report = evaluate(&seq, &opts)?;
+    let outputs: Vec<&PathBuf> = [&args.tracks, &args.series, &args.plot].into_iter().flatten().collect();
+    let created = open_outputs(&outputs)?;
+    let report = evaluate(&seq, &opts).inspect_err(|_| remove_all(&created))?;
     if let Some(p) = &args.tracks {
         write_tracks(p, &report.tracks)?;
     }
@@ -249,4 +247,29 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let text = if args.json { format!("{}\n", serde_json::to_string(&report)?) } else { table(&report) };
     super::write_stdout(&text)?;
     Ok(())
+}
+
+/// Opens every output before the evaluation, so a path that cannot be written fails now rather than
+/// after minutes of work. Existing files are opened without truncation (an evaluation that then
+/// fails leaves them as they were); returns the files this created, for [`remove_all`] on failure.
+fn open_outputs(paths: &[&PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
+    let mut created = Vec::new();
+    for p in paths {
+        let existed = p.exists();
+        if let Err(e) = std::fs::OpenOptions::new().append(true).create(true).open(p) {
+            remove_all(&created);
+            return Err(e).with_context(|| format!("{}: cannot create this output", p.display()));
+        }
+        if !existed {
+            created.push(p.to_path_buf());
+        }
+    }
+    Ok(created)
+}
+
+/// Removes the outputs [`open_outputs`] created (the evaluation failed; nothing was written to them).
+fn remove_all(created: &[PathBuf]) {
+    for p in created {
+        let _ = std::fs::remove_file(p);
+    }
 }
