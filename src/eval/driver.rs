@@ -394,7 +394,7 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
     let (mut boxes_corrected, mut depths_corrected) = (0u64, 0u64);
     let mut series = Vec::with_capacity(seq.len() as usize);
     let mut latencies = Vec::with_capacity(seq.len() as usize);
-    let (mut tracks, mut raw_depths) = (Vec::new(), Vec::new());
+    let mut tracks = Vec::new();
     let radius = opts.window_radius;
     for frame in 1..=seq.len() {
         let t = seq.timestamp(frame);
@@ -488,23 +488,15 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
                 }
             }
         }
-        raw_depths.clear();
-        let s = est.update_with(t, &obs, |o: &TrackObservation, px: Pixel| {
-            let d = depth_at(o, px);
-            if opts.track_rows {
-                raw_depths.push((o.id, d));
-            }
-            d
-        });
+        let s = est.update_with(t, &obs, &depth_at);
         if opts.track_rows {
-            let raw = |id: u32| raw_depths.iter().find(|r| r.0 == id).and_then(|r| r.1).map(|d| d.0);
             tracks.extend(est.tracks().filter(|v| v.last_seen == t).map(|v| TrackRow {
                 frame,
                 t: t.0,
                 id: v.id,
                 centre: v.bbox.center(),
                 size: (v.bbox.w, v.bbox.h),
-                depth_raw_m: raw(v.id),
+                depth_raw_m: v.depth_measured.map(|d| d.0),
                 depth_m: v.depth.map(|d| d.0),
                 speed_mps: v.speed.map(|s| s.0),
             }));

@@ -161,6 +161,8 @@ pub struct TrackView {
     pub last_seen: Seconds,
     /// Corrected box of its last observation.
     pub bbox: PixelBox,
+    /// Depth of its last observation as `depth_at` returned it (before eq. 4 and the smoothing).
+    pub depth_measured: Option<Metres>,
     /// Corrected depth of its last observation.
     pub depth: Option<Metres>,
     /// World position of its last observation.
@@ -178,6 +180,7 @@ struct TrackState {
     filter: TrackFilter,
     positions: Deque<(f64, [f64; 3]), POSITIONS>,
     bbox: PixelBox,
+    depth_measured: Option<Metres>,
     depth: Option<Metres>,
     speed: Option<f64>,
     length_sum: f64,
@@ -192,6 +195,7 @@ impl TrackState {
             filter: TrackFilter::new(),
             positions: Deque::new(),
             bbox: PixelBox::default(),
+            depth_measured: None,
             depth: None,
             speed: None,
             length_sum: 0.0,
@@ -237,6 +241,7 @@ impl ActivityEstimator {
             id: s.id,
             last_seen: Seconds(s.last_seen),
             bbox: s.bbox,
+            depth_measured: s.depth_measured,
             depth: s.depth,
             position: s.positions.back().map(|p| WorldPoint::new(p.1[0], p.1[1], p.1[2])),
             speed: s.speed.map(MetresPerSecond),
@@ -294,7 +299,8 @@ impl ActivityEstimator {
             out.boxes_corrected += (corr.width_corrected || corr.height_corrected) as u32;
             s.bbox = corr.bbox;
             let centre = corr.bbox.center();
-            let (depth, jumped) = s.filter.correct_depth(&self.post, t, depth_at(obs, centre));
+            s.depth_measured = depth_at(obs, centre);
+            let (depth, jumped) = s.filter.correct_depth(&self.post, t, s.depth_measured);
             out.depths_corrected += jumped as u32;
             s.depth = depth;
             s.speed = None;
