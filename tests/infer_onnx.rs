@@ -167,3 +167,24 @@ fn depth_map_resizes_normalises_and_samples() {
         assert!((c - ((8.0 * 10.0 + 2.0) / 255.0 - 0.5) / 0.25).abs() < 1e-5);
     }
 }
+
+#[test]
+fn depth_flip_mirrors_the_second_map_back_before_averaging() {
+    // The fixture is per pixel (channel mean), so the mirrored run's map, mirrored back, is the
+    // first map again: the average must equal the unflipped ramp. Without mirroring back it
+    // would be the ramp plus its mirror image, a constant.
+    let plain = DepthConfig { model: fixture("depth_chw.onnx"), sample_radius: 0, ..Default::default() };
+    let buf = gradient();
+    let frame = RgbFrame::new(64, 48, &buf).unwrap();
+    let mut net = DepthNet::open(&plain, ONE_THREAD).unwrap();
+    let want = net.estimate(&frame, Seconds(1.0)).unwrap().data().to_vec();
+    let mut flipped = DepthNet::open(&DepthConfig { flip: true, ..plain }, ONE_THREAD).unwrap();
+    for t in [2.0, 3.0] {
+        // Twice: the second call must start again from the frame, not from the mirrored buffer.
+        let map = flipped.estimate(&frame, Seconds(t)).unwrap();
+        assert_eq!(map.t, Seconds(t));
+        assert_eq!(map.dims(), (32, 24));
+        assert_eq!(map.data(), &want[..]);
+    }
+    assert!(want[0] < want[31], "the test frame must not be symmetric");
+}

@@ -27,6 +27,8 @@ DET_EPOCHS=${DET_EPOCHS:-13}
 # 0.903 -> 0.928 at the same precision; fish one stride-4 cell apart had merged into one peak).
 DET_SUB=${DET_SUB:-2}
 DEPTH_EPOCHS=${DEPTH_EPOCHS:-80}
+# Focus weight 1 -> 3 lowered depth at fish on all five of set 7021; 6 lowered it on 7 of 10 but made group D
+# worse on the seed set that chooses (0.0321 -> 0.0334 m/s) and on single fish, so 3 stays (README).
 DEPTH_FOCUS=${DEPTH_FOCUS:-3.0}
 DET_NET=${DET_NET:-480x288}
 DEPTH_NET=${DEPTH_NET:-480x288}

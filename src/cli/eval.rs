@@ -91,6 +91,9 @@ pub struct EvalArgs {
     /// `--depth model`: the relative-depth network (MiDaS-layout ONNX, ImageNet normalisation).
     #[arg(long, default_value = "models/fish_depth_int8.onnx")]
     pub depth_model: PathBuf,
+    /// `--depth model`: also run the depth network on the mirrored frame and average the maps.
+    #[arg(long)]
+    pub depth_flip: bool,
     /// ONNX Runtime intra-op threads.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
@@ -207,6 +210,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     opts.detector.model = crate::infer::runtime::resolve_model(&args.det_model);
     opts.detector.conf_threshold = args.det_conf;
     opts.depth_model.model = crate::infer::runtime::resolve_model(&args.depth_model);
+    opts.depth_model.flip = args.depth_flip;
     if args.paper {
         opts.motion.speed_span = Seconds(0.0);
     }

@@ -108,6 +108,9 @@ pub struct DepthConfig {
     /// Half-size, in depth-map pixels, of the window whose median is returned by a sample
     /// (0 = the nearest map pixel, at most 3).
     pub sample_radius: u32,
+    /// Also run the network on the mirrored frame and average the two maps (test-time
+    /// augmentation: twice the depth time, less of the network's per-frame noise).
+    pub flip: bool,
 }
 
 impl Default for DepthConfig {
@@ -118,6 +121,7 @@ impl Default for DepthConfig {
             mean: Normalize::IMAGENET.mean,
             std: Normalize::IMAGENET.std,
             sample_radius: 1,
+            flip: false,
         }
     }
 }

@@ -107,6 +107,7 @@ pub struct DepthNet {
     net: (u32, u32),
     norm: Normalize,
     radius: u32,
+    flip: bool,
     input: Vec<f32>,
     src: Option<(u32, u32)>,
     resampler: Resampler,
@@ -133,6 +134,7 @@ impl DepthNet {
             net,
             norm: cfg.normalize(),
             radius: cfg.sample_radius,
+            flip: cfg.flip,
             input: vec![0.0; 3 * plane],
             src: None,
             resampler: Resampler::default(),
@@ -171,8 +173,29 @@ impl DepthNet {
     }
 
     /// Runs the network on one frame taken at `t`; the returned map is reused by the next call.
+    /// With `flip`, the map is the mean of the frame's and its mirror image's (mirrored back).
     pub fn estimate(&mut self, frame: &RgbFrame<'_>, t: Seconds) -> Result<&RelDepthMap, InferError> {
         self.preprocess(frame);
+        let (mw, mh) = self.run(false)?;
+        let m = &mut self.map;
+        m.width = mw;
+        m.height = mh;
+        m.src = (frame.width(), frame.height());
+        m.radius = self.radius;
+        m.t = t;
+        if self.flip {
+            // Mirror every row of every channel in place; the preprocessed frame is not needed again.
+            for row in self.input.chunks_exact_mut(self.net.0 as usize) {
+                row.reverse();
+            }
+            self.run(true)?;
+        }
+        Ok(&self.map)
+    }
+
+    /// One network run on the input buffer: stores the output map (`mirrored_mean == false`) or
+    /// averages the mirrored output into the stored one. Returns the map's `(width, height)`.
+    fn run(&mut self, mirrored_mean: bool) -> Result<(u32, u32), InferError> {
         let (w, h) = (self.net.0 as usize, self.net.1 as usize);
         let path = &self.path;
         let run_err = |e: ort::Error| InferError::Run { path: path.clone(), reason: e.to_string() };
@@ -192,14 +215,27 @@ impl DepthNet {
             }
         };
         let m = &mut self.map;
-        m.data.clear();
-        m.data.extend_from_slice(data);
-        m.width = mw;
-        m.height = mh;
-        m.src = (frame.width(), frame.height());
-        m.radius = self.radius;
-        m.t = t;
-        Ok(&self.map)
+        if !mirrored_mean {
+            m.data.clear();
+            m.data.extend_from_slice(data);
+        } else {
+            // Same input size, so the same map size as the first run: a model that says otherwise
+            // is broken, and the unflipped map stays.
+            if m.data.len() != data.len() {
+                return Err(InferError::Shape {
+                    path: path.clone(),
+                    what: "output of the mirrored run".into(),
+                    expected: format!("{} values, as the first run", m.data.len()),
+                    actual: fmt_shape(&dims),
+                });
+            }
+            for (dst, src) in m.data.chunks_exact_mut(mw as usize).zip(data.chunks_exact(mw as usize)) {
+                for (d, s) in dst.iter_mut().zip(src.iter().rev()) {
+                    *d = 0.5 * (*d + *s);
+                }
+            }
+        }
+        Ok((mw, mh))
     }
 }
 

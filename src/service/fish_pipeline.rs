@@ -105,6 +105,7 @@ impl FishPipeline {
             model: infer::runtime::resolve_model(&cfg.depth.model),
             mean: cfg.depth.mean,
             std: cfg.depth.std,
+            flip: cfg.depth.flip,
             ..infer::DepthConfig::default()
         };
         let depth = DepthNet::open(&depth_cfg, opts(cfg.depth.threads, cfg.depth.spin))
