@@ -156,7 +156,8 @@ impl DepthNet {
         (!self.map.data.is_empty()).then_some(&self.map)
     }
 
-    /// The network input buffer as last filled by `preprocess` (planar `[3, H, W]`).
+    /// The network input buffer as last filled by `preprocess` (planar `[3, H, W]`; mirrored
+    /// after an `estimate` with `flip`).
     pub fn input_tensor(&self) -> &[f32] {
         &self.input
     }
@@ -176,10 +177,8 @@ impl DepthNet {
     /// With `flip`, the map is the mean of the frame's and its mirror image's (mirrored back).
     pub fn estimate(&mut self, frame: &RgbFrame<'_>, t: Seconds) -> Result<&RelDepthMap, InferError> {
         self.preprocess(frame);
-        let (mw, mh) = self.run(false)?;
+        self.run(false)?;
         let m = &mut self.map;
-        m.width = mw;
-        m.height = mh;
         m.src = (frame.width(), frame.height());
         m.radius = self.radius;
         m.t = t;
@@ -193,9 +192,9 @@ impl DepthNet {
         Ok(&self.map)
     }
 
-    /// One network run on the input buffer: stores the output map (`mirrored_mean == false`) or
-    /// averages the mirrored output into the stored one. Returns the map's `(width, height)`.
-    fn run(&mut self, mirrored_mean: bool) -> Result<(u32, u32), InferError> {
+    /// One network run on the input buffer: stores the output as the map's data and size
+    /// (`mirrored_mean == false`) or averages the mirrored output into the stored map.
+    fn run(&mut self, mirrored_mean: bool) -> Result<(), InferError> {
         let (w, h) = (self.net.0 as usize, self.net.1 as usize);
         let path = &self.path;
         let run_err = |e: ort::Error| InferError::Run { path: path.clone(), reason: e.to_string() };
@@ -218,14 +217,16 @@ impl DepthNet {
         if !mirrored_mean {
             m.data.clear();
             m.data.extend_from_slice(data);
+            m.width = mw;
+            m.height = mh;
         } else {
             // Same input size, so the same map size as the first run: a model that says otherwise
             // is broken, and the unflipped map stays.
-            if m.data.len() != data.len() {
+            if (mw, mh) != (m.width, m.height) {
                 return Err(InferError::Shape {
                     path: path.clone(),
                     what: "output of the mirrored run".into(),
-                    expected: format!("{} values, as the first run", m.data.len()),
+                    expected: format!("a {}x{} map, as the first run", m.width, m.height),
                     actual: fmt_shape(&dims),
                 });
             }
@@ -235,7 +236,7 @@ impl DepthNet {
                 }
             }
         }
-        Ok((mw, mh))
+        Ok(())
     }
 }
 
