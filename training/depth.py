@@ -126,13 +126,20 @@ def focus_masks(boxes, refs, out_hw, net_hw, core=0.5):
 
 
 def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budget_s=None, focus=None,
-          focus_weight=FOCUS_WEIGHT):
-    """Returns the trained model and the number of epochs run (the time budget may stop it early)."""
+          focus_weight=FOCUS_WEIGHT, crop=None, crop_until=1.0):
+    """Returns the trained model and the number of epochs run (the time budget may stop it early).
+
+    `crop` (w, h in input pixels, multiples of 32): each training frame is a random window of that
+    size instead of the whole frame (the network is fully convolutional; the export keeps the full
+    input size). Offsets are even, so the half-resolution depth target and focus map crop exactly.
+    `crop_until`: the fraction of the run (steps or time budget, as the learning rate) after which
+    training goes on with whole frames."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     model = FishDepth().to(memory_format=torch.channels_last)
     bf16 = use_bf16()
-    log(f"depth: {'bf16 autocast' if bf16 else 'fp32'}, channels-last")
+    log(f"depth: {'bf16 autocast' if bf16 else 'fp32'}, channels-last"
+        + (f", random {crop[0]}x{crop[1]} crops until {crop_until:.0%} of the run" if crop else ""))
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     n = len(images)
     steps = epochs * math.ceil(n / batch)
@@ -150,11 +157,18 @@ def train(images, depth, epochs, batch=16, lr=2e-3, seed=0, log=print, time_budg
             xs, ds, fs = [], [], []
             for j in idx:
                 im, d = images[j], depth[j]
+                fj = focus[j] if focus is not None else None
+                if crop and frac < crop_until:
+                    ox = 2 * int(rng.integers(0, (im.shape[1] - crop[0]) // 2 + 1))
+                    oy = 2 * int(rng.integers(0, (im.shape[0] - crop[1]) // 2 + 1))
+                    win = (slice(oy // 2, (oy + crop[1]) // 2), slice(ox // 2, (ox + crop[0]) // 2))
+                    im, d = im[oy:oy + crop[1], ox:ox + crop[0]], d[win]
+                    fj = fj[win] if fj is not None else None
                 flip = rng.random() < 0.5
                 if flip:
                     im, d = im[:, ::-1], d[:, ::-1]
-                if focus is not None:
-                    fs.append(np.ascontiguousarray(focus[j][:, ::-1] if flip else focus[j]))
+                if fj is not None:
+                    fs.append(np.ascontiguousarray(fj[:, ::-1] if flip else fj))
                 im = np.clip(im.astype(np.float32) * rng.uniform(0.85, 1.15) + rng.uniform(-10, 10), 0, 255)
                 xs.append(to_input(im))
                 ds.append(np.ascontiguousarray(d))

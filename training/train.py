@@ -27,6 +27,20 @@ import quant
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
+def parse_crop(text, net_w, net_h):
+    """'WxH' -> (w, h), checked against the network input; '' -> None."""
+    if not text:
+        return None
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise SystemExit(f"--depth-crop {text!r}: expected WxH, e.g. 320x192")
+    if w % 32 or h % 32 or not (0 < w <= net_w and 0 < h <= net_h):
+        raise SystemExit(f"--depth-crop {text!r}: width and height must be multiples of 32 within the "
+                         f"{net_w}x{net_h} input")
+    return w, h
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--data", required=True)
@@ -41,6 +55,10 @@ def main():
                     help="train on the first N training sequences in seed order (0: all of them)")
     ap.add_argument("--depth-focus", type=float, default=depth.FOCUS_WEIGHT,
                     help="weight of the depth loss's focus term on fish and reference cubes (0: off)")
+    ap.add_argument("--depth-crop", default="",
+                    help="WxH: train the depth network on random windows of that size (multiples of 32)")
+    ap.add_argument("--depth-crop-until", type=float, default=1.0,
+                    help="with --depth-crop: fraction of the run after which whole frames are used")
     ap.add_argument("--det-sub", type=int, default=2,
                     help="detector sub-cells per stride-4 cell and axis (2: heat map and boxes at stride 2)")
     ap.add_argument("--metrics", default=os.path.join(HERE, "metrics.json"))
@@ -49,6 +67,9 @@ def main():
                     help="do not train: quantise and measure the fp32 files already in --models again, keeping "
                          "their training record from --metrics")
     args = ap.parse_args()
+    depth_crop = parse_crop(args.depth_crop, data.NET_W, data.NET_H)  # before the data loads
+    if not 0.0 < args.depth_crop_until <= 1.0:
+        raise SystemExit(f"--depth-crop-until {args.depth_crop_until}: expected a fraction in (0, 1]")
     torch.set_num_threads(args.threads)
     skip = set(filter(None, args.skip.split(",")))
     os.makedirs(args.models, exist_ok=True)
@@ -130,13 +151,17 @@ def main():
                 log(f"depth: focus term weight {args.depth_focus} on {focus.mean() * 100:.1f}% of the pixels")
             model, epochs_run = depth.train(tr_images, tr_depth, args.depth_epochs, log=log,
                                             time_budget_s=args.depth_budget_s or args.budget_s, focus=focus,
-                                            focus_weight=args.depth_focus)
+                                            focus_weight=args.depth_focus, crop=depth_crop,
+                                            crop_until=args.depth_crop_until)
             train_s = time.time() - t1
             depth.export(model, fp32, data.NET_H, data.NET_W)
             res = {"train_seconds": round(train_s, 1), "epochs": args.depth_epochs, "epochs_run": epochs_run,
                    "autocast": "bf16" if det.use_bf16() else "fp32",
                    "data": data_info,
                    "input": [data.NET_W, data.NET_H], "focus_weight": args.depth_focus}
+            if depth_crop:
+                res["train_crop"] = list(depth_crop)
+                res["train_crop_until"] = args.depth_crop_until
         calib = [depth.to_input(tr_images[i]) for i in calib_idx]
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             quant.quantize(fp32, os.path.join(args.models, f"fish_depth_int8_{tag}.onnx"), calib, "image", act)
