@@ -10,9 +10,20 @@ import os
 import cv2
 import numpy as np
 
+def parse_size(text, what):
+    """'WxH' -> (w, h) positive ints; anything else stops with a message naming `what`."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise SystemExit(f"{what} {text!r}: expected WxH, e.g. 320x192")
+    if w <= 0 or h <= 0:
+        raise SystemExit(f"{what} {text!r}: width and height must be positive")
+    return w, h
+
+
 # Network input (letterbox of 640x384 without padding). FME_NET=WxH overrides it for one training run
 # (train.sh trains the detector and the depth network in separate runs, each at its own size).
-NET_W, NET_H = (int(v) for v in os.environ.get("FME_NET", "320x192").split("x"))
+NET_W, NET_H = parse_size(os.environ.get("FME_NET", "320x192"), "FME_NET")
 DEPTH_OUT_W, DEPTH_OUT_H = NET_W // 2, NET_H // 2  # depth network output (half the input)
 
 

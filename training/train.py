@@ -31,11 +31,8 @@ def parse_crop(text, net_w, net_h):
     """'WxH' -> (w, h), checked against the network input; '' -> None."""
     if not text:
         return None
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise SystemExit(f"--depth-crop {text!r}: expected WxH, e.g. 320x192")
-    if w % 32 or h % 32 or not (0 < w <= net_w and 0 < h <= net_h):
+    w, h = data.parse_size(text, "--depth-crop")
+    if w % 32 or h % 32 or w > net_w or h > net_h:
         raise SystemExit(f"--depth-crop {text!r}: width and height must be multiples of 32 within the "
                          f"{net_w}x{net_h} input")
     return w, h
