@@ -36,7 +36,8 @@ def quant_note(d):
     first = ""
     if d.get("float_stem"):
         first = "the first convolution (it reads the 3-channel image; faster in float here) and\n"
-    return f"\nIn the int8 file {first}the head's last convolution with the in-graph decode stay in float."
+    return (f"\nIn the int8 file {first}the head's last 1x1 convolution (a Gemm on channels-last activations)\n"
+            "and the in-graph decode stay in float.")
 
 
 def det_card(m):
@@ -82,7 +83,7 @@ layouts A to F, 640x384): training seeds {data.get('train_seeds')} ({data['train
 
 ## Training
 `bash training/train.sh` (or `make -C training all`): CPU, torch {m.get('torch', '2.15.0')}, AdamW, one-cycle LR,
-batch 16, {d['epochs']} epochs requested{stopped}, fixed seeds. Training time on this 2-core machine (shared):
+batch 16, {d['epochs']} epochs requested{stopped}, fixed seeds. Training time on the 2-core machine that trained it (shared):
 {d['train_seconds']:.0f} s{autocast_note(d)}.
 
 ## Quality on the held-out sequences
@@ -93,8 +94,8 @@ visibility >= 0.5 must be found, less visible ones are "don't care". NMS IoU 0.7
 |---|---|---|---|---|---|
 {chr(10).join(rows)}
 
-Timings: ONNX Runtime 1.31.1 (Python), batch 1, median of 50 runs after 5 warm-ups, on this
-2-vCPU Xeon (AVX-512 VNNI) shared with other jobs; `make bench-infer` measures the same in fme.
+Timings: ONNX Runtime 1.31.1 (Python), batch 1, median of 50 runs after 5 warm-ups, on a 2-vCPU
+{d.get('timed_on', 'Xeon (AVX-512 VNNI)')} shared with other jobs; `make bench-infer` measures the same in fme.
 
 ## Licence
 Weights and code: MIT OR Apache-2.0 (this project). Trained only on synthetic frames from fme's own
@@ -131,7 +132,10 @@ Files: `fish_depth_fp32.onnx` and `fish_depth_int8.onnx` (static int8, QDQ, {d.g
 
 ## Model
 U-Net-style encoder/decoder with 3x3-conv ReLU blocks (strides 2 to 32), output at half the input
-resolution, softplus. Trained with MiDaS' scale- and shift-invariant loss (median / mean absolute
+resolution, softplus. In the exported graph the last convolution (to one channel) is a depthwise
+convolution plus a channel sum, and softplus is Relu(x) + Log(1 + Exp(-|x|)) (`depth.fast_tail`:
+the same map up to float rounding, faster in ONNX Runtime); both stay in float in the int8 file.
+Trained with MiDaS' scale- and shift-invariant loss (median / mean absolute
 deviation normalisation, 20% trimmed L1, multi-scale gradient matching) on disparity 1/z from the
 generator's depth maps, plus a focus term (untrimmed L1 on the normalised maps over the fish box
 cores and the reference cubes, the only pixels fme reads; weight {d.get('focus_weight', 0)}). Code: `training/depth.py`.
@@ -140,7 +144,7 @@ cores and the reference cubes, the only pixels fme reads; weight {d.get('focus_w
 Rendered like the detector's (see fish_det.md): training seeds {data.get('train_seeds')} ({data['train_frames']} frames
 from {len(data['train_sequences'])} sequences), held-out seeds {data.get('val_seeds')}. `bash training/train.sh` (`SKIP=det` for this
 model alone); {d['epochs']} epochs requested{stopped};
-training time {d['train_seconds']:.0f} s on this shared 2-core CPU{autocast_note(d)}.
+training time {d['train_seconds']:.0f} s on the shared 2-core CPU that trained it{autocast_note(d)}.
 
 ## Quality on the held-out sequences (layout of each sequence, A to F)
 Per frame, scale and shift are fitted in disparity space to the reference cubes' front-face centres
@@ -150,6 +154,9 @@ median) is compared with the camera z of its body centre.
 | file | MB | ms, 1 thread | ms, 2 threads | RMSE m | delta<1.25 | fish |
 |---|---|---|---|---|---|---|
 {chr(10).join(rows)}
+
+Timings: ONNX Runtime 1.31.1 (Python), batch 1, median of 50 runs after 5 warm-ups, on a 2-vCPU
+{d.get('timed_on', 'Xeon (AVX-512 VNNI)')} shared with other jobs; `make bench-infer` measures the same in fme.
 
 ## Licence
 MIT OR Apache-2.0 (this project); synthetic training data from fme's own generator only.

@@ -62,8 +62,8 @@ class FishDet(nn.Module):
         nn.init.constant_(self.out.bias[0:sub * sub], -4.6)  # score prior 0.01
         self.export_decode = False
 
-    def head_out(self, x):
-        """The head's last 1x1 convolution: [B, 5*sub^2, H/4, W/4]."""
+    def features(self, x):
+        """The head's activation before its last 1x1 convolution: [B, head, H/4, W/4]."""
         c4 = self.s4(self.stem(x))
         c8 = self.s8(c4)
         c16 = self.s16(c8)
@@ -71,7 +71,11 @@ class FishDet(nn.Module):
         p16 = self.m16(self.l16(c16) + F.interpolate(self.l32(c32), scale_factor=2.0, mode="nearest"))
         p8 = self.m8(self.l8(c8) + F.interpolate(p16, scale_factor=2.0, mode="nearest"))
         p4 = self.m4(self.l4(c4) + F.interpolate(self.r4(p8), scale_factor=2.0, mode="nearest"))
-        return self.out(self.h(p4))
+        return self.h(p4)
+
+    def head_out(self, x):
+        """The head's last 1x1 convolution: [B, 5*sub^2, H/4, W/4]."""
+        return self.out(self.features(x))
 
     def raw(self, x):
         o = self.head_out(x)
@@ -82,17 +86,17 @@ class FishDet(nn.Module):
     def forward(self, x):
         if not self.export_decode:
             return self.raw(x)
-        return decode(self.head_out(x), self.sub)
+        return decode_nhwc(self.features(x), self.out.weight, self.out.bias, self.sub)
 
 
 def decode(o, sub):
-    """The in-graph box decode and peak extraction of the exported model, from the head's output
-    [B, 5*sub^2, gh, gw] (stride-4 cells; channel c*sub^2 + a*sub + b is channel c of sub-cell row a,
-    column b, as pixel_shuffle reads it) to the YOLO layout [B, 5, sub^2*gh*gw]. Columns are ordered
-    by sub-cell, then cell (fme's decoder does not care about column order). The boxes are decoded
-    in the stride-4 layout; only the one-channel heat map is shuffled to stride STRIDE/sub for the
-    3x3 peak test and back: shuffling all five channels (DepthToSpace) had cost 0.24 ms of the
-    detector's ~6 ms."""
+    """The box decode and peak extraction, from the head's output [B, 5*sub^2, gh, gw] (stride-4
+    cells; channel c*sub^2 + a*sub + b is channel c of sub-cell row a, column b, as pixel_shuffle
+    reads it) to the YOLO layout [B, 5, sub^2*gh*gw]. Columns are ordered by sub-cell, then cell
+    (fme's decoder does not care about column order). The reference form: the exported graph
+    computes the same with `decode_nhwc` (checked bit for bit by check_export.py). The boxes are
+    decoded in the stride-4 layout; only the heat map is shuffled to stride STRIDE/sub for the 3x3
+    peak test and back (shuffling all five channels with DepthToSpace had cost 0.24 ms of ~6 ms)."""
     b, _, gh, gw = o.shape
     st = STRIDE // sub
     r = o.reshape(b, 5, sub * sub, gh, gw)
@@ -112,6 +116,109 @@ def decode(o, sub):
     s = (hm * peak)[:, None]
     return torch.cat([cxy, wh, s], 1).reshape(b, 5, sub * sub * gh * gw)
 
+
+
+def decode_nhwc(y, weight, bias, sub):
+    """The exported graph's tail: the same numbers, in the same column order, as
+    `decode(out(y), sub)` for the head's last 1x1 convolution (`weight`, `bias`) and the activation
+    `y` [1, C, gh, gw] before it, but shaped for ONNX Runtime. Its int8 convolutions run
+    channels-last, so `y` is read channels-last (the permute cancels the layout transpose ONNX
+    Runtime puts after them) and the convolution is one float Gemm that writes its output
+    component-major ([5*sub^2, gh*gw], what the output layout needs) instead of a float Conv in
+    ONNX Runtime's blocked layout (reorder in, convolve, reorder out). The 3x3 peak test on the
+    stride-STRIDE/sub map works on the sub-cell planes (`peak_max`) instead of shuffling the heat
+    map there and back (DepthToSpace and a 5-D transpose were kernels of their own)."""
+    b, c, gh, gw = y.shape
+    assert b == 1, "the exported graph takes one frame"
+    st = STRIDE // sub
+    k2 = sub * sub
+    o = torch.addmm(bias[:, None], weight[:, :, 0, 0], y.permute(0, 2, 3, 1).reshape(gh * gw, c).t())
+    # Row c*sub^2 + a*sub + b is channel c of sub-cell row a, column b, as pixel_shuffle reads it.
+    heat, ox, oy, lw, lh = o.reshape(5, k2, gh, gw).unbind(0)
+    k = torch.arange(k2, dtype=y.dtype)[:, None, None]
+    gy, gx = torch.meshgrid(torch.arange(gh, dtype=y.dtype), torch.arange(gw, dtype=y.dtype), indexing="ij")
+    cx = (gx * sub + (k % sub) + 0.5 + ox) * st
+    cy = (gy * sub + (k // sub) + 0.5 + oy) * st
+    w = torch.exp(lw.clamp(-4.0, 6.0)) * st
+    h = torch.exp(lh.clamp(-4.0, 6.0)) * st
+    hm = torch.sigmoid(heat)  # [sub^2, gh, gw]
+    peak = (peak_max(hm, sub) == hm).to(y.dtype)
+    return torch.stack([v.reshape(k2 * gh * gw) for v in (cx, cy, w, h, hm * peak)])[None]
+
+
+def peak_max(hm, sub):
+    """The 3x3 maximum around every cell of the stride-STRIDE/sub score map (values 0..1), computed on its sub-cell
+    planes `hm` [sub^2, gh, gw] (plane a*sub + b holds map rows a, a + sub, ...; columns b, b +
+    sub, ...), so max_pool2d(pixel_shuffle(hm), 3, 1, 1) without the shuffle. With sub=2 the row
+    above a row of phase 0 is the previous cell's phase 1 and the row below it the same cell's
+    phase 1; for phase 1, the same cell's phase 0 and the next cell's phase 0. Columns likewise."""
+    if sub == 1:
+        return F.max_pool2d(hm[None], 3, 1, 1)[0]
+    assert sub == 2, "peak_max handles sub 1 and 2"
+    low = -1.0  # the edge padding: below every score (sigmoid, 0..1), as max_pool2d's -inf padding is
+
+    def prev(x, dim):  # x shifted by one cell along dim (-2 rows, -1 columns): x[i - 1], `low` at 0
+        return F.pad(x.narrow(dim, 0, x.shape[dim] - 1), (1, 0) if dim == -1 else (0, 0, 1, 0), value=low)
+
+    def next_(x, dim):  # x[i + 1], `low` at the end
+        return F.pad(x.narrow(dim, 1, x.shape[dim] - 1), (0, 1) if dim == -1 else (0, 0, 0, 1), value=low)
+
+    p = hm.reshape(2, 2, *hm.shape[1:])  # [row phase, column phase, gh, gw]
+    r0, r1 = p[0], p[1]
+    rows = torch.stack([torch.maximum(torch.maximum(r0, r1), prev(r1, -2)),
+                        torch.maximum(torch.maximum(r1, r0), next_(r0, -2))])
+    c0, c1 = rows[:, 0], rows[:, 1]
+    cols = torch.stack([torch.maximum(torch.maximum(c0, c1), prev(c1, -1)),
+                        torch.maximum(torch.maximum(c1, c0), next_(c0, -1))], 1)
+    return cols.reshape(hm.shape)
+
+
+def from_onnx(path, sub=2):
+    """A FishDet holding the weights of an exported fp32 file (`export`, with the head's last 1x1
+    convolution as a Conv or as `decode_nhwc`'s Gemm), for re-exporting it with this module's
+    current graph tail without training again. The export folded each BatchNorm into its
+    convolution; here every BatchNorm becomes the identity plus that bias (eps 0, so exactly)."""
+    import onnx
+    from onnx import numpy_helper
+
+    m = onnx.load(path)
+    init = {i.name: numpy_helper.to_array(i) for i in m.graph.initializer}
+    model = FishDet(sub=sub)
+    mods = dict(model.named_modules())
+    done = set()
+    for n in m.graph.node:
+        if n.op_type == "Gemm" and n.input[0] in init:  # `decode_nhwc`'s head: Gemm(out.weight, y^T, out.bias)
+            w = torch.from_numpy(init[n.input[0]].copy())
+            model.out.weight.data.copy_(w.reshape(model.out.weight.shape))
+            model.out.bias.data.copy_(torch.from_numpy(init[n.input[2]].copy()).reshape(-1))
+            done.add("out")
+            continue
+        if n.op_type != "Conv":
+            continue
+        # Scope "/s4/s4.1/a/a.0/Conv" is module "s4.1.a.0" (Sequential children carry their parent's
+        # name as a prefix); its BatchNorm is the next child, "s4.1.a.1".
+        scope = n.name.strip("/").split("/")[:-1]
+        mod_name = ".".join([scope[0]] + [p.split(".")[-1] for p in scope[1:]])
+        w, bias = torch.from_numpy(init[n.input[1]].copy()), torch.from_numpy(init[n.input[2]].copy())
+        if mod_name == "out":
+            model.out.weight.data.copy_(w)
+            model.out.bias.data.copy_(bias)
+            done.add("out")
+            continue
+        parent, idx = mod_name.rsplit(".", 1)
+        conv_m = mods[mod_name]
+        bn = mods[f"{parent}.{int(idx) + 1}"]
+        conv_m.weight.data.copy_(w)
+        bn.eps = 0.0
+        bn.running_mean.zero_()
+        bn.running_var.fill_(1.0)
+        bn.weight.data.fill_(1.0)
+        bn.bias.data.copy_(bias)
+        done.add(mod_name)
+    missing = [k for k, v in mods.items() if isinstance(v, nn.Conv2d) and k not in done]
+    if missing:
+        raise SystemExit(f"{path}: no weights for {missing} (not a FishDet export with sub={sub}?)")
+    return model.eval()
 
 # Regression samples (TTFNet, Liu et al. 2020): besides its centre cell, every cell where a fish's
 # heat-map Gaussian is at least REG_GAUSS_MIN regresses that fish's box, weighted by the Gaussian and

@@ -218,6 +218,20 @@ def data_input(img_u8):
     return to_input(img_u8)[None].astype(np.float32)
 
 
+def cpu_name():
+    """The CPU the timings ran on, for the model cards: its model name and the int8/bf16 extensions
+    that change ONNX Runtime's and oneDNN's speed most."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            text = f.read()
+    except OSError:
+        return "unknown CPU"
+    name = next((ln.split(":", 1)[1].strip() for ln in text.splitlines() if ln.startswith("model name")), "unknown CPU")
+    flags = set(next((ln.split(":", 1)[1].split() for ln in text.splitlines() if ln.startswith("flags")), []))
+    ext = [e for f, e in (("amx_tile", "AMX"), ("avx512_vnni", "AVX-512 VNNI"), ("avx512_bf16", "AVX-512 BF16")) if f in flags]
+    return f"{name} ({', '.join(ext)})" if ext else name
+
+
 def time_model(path, threads, runs=50, warmup=5):
     import time
 

@@ -3,8 +3,9 @@
 Two variants are produced and measured, because on x86 ONNX Runtime 1.31 fuses QDQ convolutions
 into int8 kernels only with uint8 activations (U8S8), while int8/int8 (S8S8) runs most convolutions
 in float between Q/DQ pairs (research note onnx-timings.md). The tail of each graph (the
-detector's last convolution and in-graph box decode; the depth head's last convolution and
-softplus) stays in float: it mixes pixel coordinates with probabilities under one scale otherwise.
+detector's head 1x1 convolution, exported as a Gemm, and in-graph box decode; the depth head's
+last convolution and softplus, as `depth.fast_tail` writes them) stays in float: it mixes pixel
+coordinates with probabilities under one scale otherwise.
 With `float_stem`, the first convolution (the one reading the 3-channel image) stays in float too:
 for the detector, ONNX Runtime's int8 kernel used its 3 input channels poorly (0.82 ms of ~6 ms,
 plus quantising the image), and the float one with its output quantised was faster (interleaved,
@@ -29,11 +30,11 @@ class Reader(CalibrationDataReader):
 
 
 def tail_nodes(model_path):
-    """Names of the last Conv and every node downstream of it."""
+    """Names of the last Conv, MatMul or Gemm (the detector's head convolution, exported channels-last as
+    a MatMul, which the pre-processing may fuse with its bias into a Gemm) and every node downstream of it."""
     m = onnx.load(model_path)
     nodes = list(m.graph.node)
-    convs = [n for n in nodes if n.op_type == "Conv"]
-    last = convs[-1]
+    last = [n for n in nodes if n.op_type in ("Conv", "MatMul", "Gemm")][-1]
     tail = {last.name}
     tensors = set(last.output)
     for n in nodes[nodes.index(last) + 1:]:

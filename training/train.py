@@ -3,6 +3,7 @@
 
     python train.py --data DATA_DIR --models ../models [--det-epochs N] [--depth-epochs N]
     python train.py --data DATA_DIR --requantize [--skip depth]   # re-quantise the fp32 files only
+    python train.py --data DATA_DIR --reexport --skip depth       # re-export the detector's graph, then re-quantise
 
 DATA_DIR/train and DATA_DIR/val hold fme sequences (made by train.sh with `fme synth`).
 Writes models/fish_det_{fp32,int8}.onnx, models/fish_depth_{fp32,int8}.onnx and
@@ -63,7 +64,11 @@ def main():
     ap.add_argument("--requantize", action="store_true",
                     help="do not train: quantise and measure the fp32 files already in --models again, keeping "
                          "their training record from --metrics")
+    ap.add_argument("--reexport", action="store_true",
+                    help="like --requantize, but first rebuild the fp32 files' graphs as an export does now, from "
+                         "their own weights (detector: det.py's export graph; depth: depth.fast_tail)")
     args = ap.parse_args()
+    args.requantize = args.requantize or args.reexport
     depth_crop = parse_crop(args.depth_crop, data.NET_W, data.NET_H)  # before the data loads
     if not 0.0 < args.depth_crop_until <= 1.0:
         raise SystemExit(f"--depth-crop-until {args.depth_crop_until}: expected a fraction in (0, 1]")
@@ -101,6 +106,9 @@ def main():
         fp32 = os.path.join(args.models, "fish_det_fp32.onnx")
         if args.requantize:
             res = training_record(metrics, "detector", fp32, log)
+            if args.reexport:
+                det.export(det.from_onnx(fp32, args.det_sub), fp32, data.NET_H, data.NET_W)
+                log(f"detector: re-exported {fp32} from its own weights")
         else:
             t1 = time.time()
             model, epochs_run = det.train(tr_images, tr_boxes, args.det_epochs, log=log,
@@ -118,6 +126,7 @@ def main():
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             out = os.path.join(args.models, f"fish_det_int8_{tag}.onnx")
             quant.quantize(fp32, out, calib, "images", act, float_stem=True)
+        res["timed_on"] = evaluate.cpu_name()
         for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
             path = os.path.join(args.models, f"fish_det_{tag}.onnx")
             sess = evaluate.session(path)
@@ -139,6 +148,8 @@ def main():
         fp32 = os.path.join(args.models, "fish_depth_fp32.onnx")
         if args.requantize:
             res = training_record(metrics, "depth", fp32, log)
+            if args.reexport and depth.fast_tail(fp32):
+                log(f"depth: rewrote the graph tail of {fp32} (depth.fast_tail)")
         else:
             t1 = time.time()
             focus = None
@@ -162,6 +173,7 @@ def main():
         calib = [depth.to_input(tr_images[i]) for i in calib_idx]
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             quant.quantize(fp32, os.path.join(args.models, f"fish_depth_int8_{tag}.onnx"), calib, "image", act)
+        res["timed_on"] = evaluate.cpu_name()
         for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
             path = os.path.join(args.models, f"fish_depth_{tag}.onnx")
             sess = evaluate.session(path)
@@ -182,7 +194,7 @@ def main():
         metrics["torch"] = torch.__version__
     logs = metrics.get("log") if isinstance(metrics.get("log"), dict) else {}
     run = "+".join(st for st in ("det", "depth") if st not in skip) or "none"
-    logs[run + (" requantize" if args.requantize else "")] = log_lines
+    logs[run + (" reexport" if args.reexport else " requantize" if args.requantize else "")] = log_lines
     metrics["log"] = logs
     with open(metrics_path, "w") as f:
         json.dump(metrics, f, indent=1)
@@ -194,7 +206,7 @@ def main():
 
 
 # What a measurement re-computes; everything else in a model's metrics is its training record.
-MEASURED_KEYS = ("fp32", "int8_u8s8", "int8_s8s8", "int8_kept", "float_stem")
+MEASURED_KEYS = ("fp32", "int8_u8s8", "int8_s8s8", "int8_kept", "float_stem", "timed_on")
 
 
 def training_record(metrics, key, fp32, log):

@@ -1,0 +1,105 @@
+#!/usr/bin/env python3
+"""Checks that the exported graphs' rewritten tails compute what the plain forms do (run by
+`make -C training smoke`; random weights, no data needed):
+
+- det.peak_max equals max_pool2d on the pixel-shuffled score map, bit for bit (ties included);
+- det.decode_nhwc equals det.decode, bit for bit, given the same head output;
+- the exported detector in ONNX Runtime matches the PyTorch module it came from;
+- depth.fast_tail leaves the depth map as the plain export gives it, up to float rounding, and a
+  second call changes nothing.
+"""
+import os
+import sys
+import tempfile
+
+import numpy as np
+import onnxruntime as ort
+import torch
+import torch.nn.functional as F
+
+import depth
+import det
+
+
+def fail(msg):
+    raise SystemExit(f"check_export: {msg}")
+
+
+def run_onnx(path, name, x):
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = 1
+    return ort.InferenceSession(path, so, providers=["CPUExecutionProvider"]).run(None, {name: x})[0]
+
+
+def check_peak_max():
+    g = torch.Generator().manual_seed(0)
+    for gh, gw in ((72, 120), (5, 7), (1, 1), (2, 3)):
+        hm = torch.rand(4, gh, gw, generator=g)
+        hm[:, ::2, ::3] = 0.5  # ties between neighbours
+        want = F.pixel_unshuffle(F.max_pool2d(F.pixel_shuffle(hm[None], 2), 3, 1, 1), 2)[0]
+        if not torch.equal(det.peak_max(hm, 2), want):
+            fail(f"peak_max differs from the shuffled max_pool2d on a {gh}x{gw} grid")
+        one = hm[:1]
+        if not torch.equal(det.peak_max(one, 1), F.max_pool2d(one[None], 3, 1, 1)[0]):
+            fail(f"peak_max(sub=1) differs from max_pool2d on a {gh}x{gw} grid")
+
+
+def check_decode():
+    g = torch.Generator().manual_seed(1)
+    for sub in (1, 2):
+        c = 5 * sub * sub
+        o = torch.randn(1, c, 9, 13, generator=g)
+        o[:, 0:sub * sub, ::2, ::2] = 0.0  # tied scores
+        eye = torch.eye(c)[:, :, None, None]  # the head's 1x1 convolution as the identity: y is its output
+        got = det.decode_nhwc(o, eye, torch.zeros(c), sub)
+        if not torch.equal(got, det.decode(o, sub)):
+            fail(f"decode_nhwc differs from decode (sub={sub})")
+
+
+def check_det_export(tmp):
+    torch.manual_seed(2)
+    model = det.FishDet(sub=2).eval()
+    x = torch.rand(1, 3, 96, 160)
+    path = os.path.join(tmp, "det.onnx")
+    det.export(model, path, 96, 160)
+    model.export_decode = True
+    with torch.no_grad():
+        want = model(x).numpy()
+    got = run_onnx(path, "images", x.numpy())
+    if got.shape != want.shape:
+        fail(f"exported detector output {got.shape}, PyTorch {want.shape}")
+    box = np.abs(got[0, :4] - want[0, :4]).max()
+    same_score = np.mean(np.abs(got[0, 4] - want[0, 4]) < 1e-4)
+    if box > 1e-2 or same_score < 0.999:
+        fail(f"exported detector differs from PyTorch: boxes up to {box:.3g} px apart, "
+             f"{same_score:.4f} of the scores agree")
+
+
+def check_depth_tail(tmp):
+    torch.manual_seed(3)
+    model = depth.FishDepth().eval()
+    x = torch.randn(1, 3, 96, 160)
+    plain = os.path.join(tmp, "depth_plain.onnx")
+    torch.onnx.export(model, (x,), plain, input_names=["image"], output_names=["depth"], opset_version=17,
+                      dynamo=False)
+    fast = os.path.join(tmp, "depth_fast.onnx")
+    depth.export(model, fast, 96, 160)
+    a, b = run_onnx(plain, "image", x.numpy()), run_onnx(fast, "image", x.numpy())
+    err = np.abs(a - b).max() / max(np.abs(a).max(), 1e-6)
+    if a.shape != b.shape or err > 1e-5:
+        fail(f"depth.fast_tail changed the map: shapes {a.shape} / {b.shape}, largest difference {err:.3g} of the range")
+    if depth.fast_tail(fast):
+        fail("depth.fast_tail rewrote an already rewritten graph")
+
+
+def main():
+    check_peak_max()
+    check_decode()
+    with tempfile.TemporaryDirectory() as tmp:
+        check_det_export(tmp)
+        check_depth_tail(tmp)
+    print("check_export: detector and depth graph tails match their plain forms")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
