@@ -117,7 +117,6 @@ def decode(o, sub):
     return torch.cat([cxy, wh, s], 1).reshape(b, 5, sub * sub * gh * gw)
 
 
-
 def decode_nhwc(y, weight, bias, sub):
     """The exported graph's tail: the same numbers, in the same column order, as
     `decode(out(y), sub)` for the head's last 1x1 convolution (`weight`, `bias`) and the activation
@@ -147,11 +146,12 @@ def decode_nhwc(y, weight, bias, sub):
 
 
 def peak_max(hm, sub):
-    """The 3x3 maximum around every cell of the stride-STRIDE/sub score map (values 0..1), computed on its sub-cell
-    planes `hm` [sub^2, gh, gw] (plane a*sub + b holds map rows a, a + sub, ...; columns b, b +
-    sub, ...), so max_pool2d(pixel_shuffle(hm), 3, 1, 1) without the shuffle. With sub=2 the row
-    above a row of phase 0 is the previous cell's phase 1 and the row below it the same cell's
-    phase 1; for phase 1, the same cell's phase 0 and the next cell's phase 0. Columns likewise."""
+    """The 3x3 maximum around every cell of the stride-STRIDE/sub score map (values 0..1),
+    computed on its sub-cell planes `hm` [sub^2, gh, gw] (plane a*sub + b holds map rows a, a + sub,
+    ...; columns b, b + sub, ...): max_pool2d(pixel_shuffle(hm), 3, 1, 1) without the shuffle. With
+    sub=2 the row above a row of phase 0 is the previous cell's phase 1 and the row below it the
+    same cell's phase 1; for phase 1, the same cell's phase 0 and the next cell's phase 0. Columns
+    likewise."""
     if sub == 1:
         return F.max_pool2d(hm[None], 3, 1, 1)[0]
     assert sub == 2, "peak_max handles sub 1 and 2"
@@ -189,6 +189,9 @@ def from_onnx(path, sub=2):
     for n in m.graph.node:
         if n.op_type == "Gemm" and n.input[0] in init:  # `decode_nhwc`'s head: Gemm(out.weight, y^T, out.bias)
             w = torch.from_numpy(init[n.input[0]].copy())
+            if w.numel() != model.out.weight.numel():
+                raise SystemExit(f"{path}: head Gemm weights {tuple(w.shape)}, FishDet(sub={sub}) has "
+                                 f"{tuple(model.out.weight.shape[:2])} (trained with another --det-sub?)")
             model.out.weight.data.copy_(w.reshape(model.out.weight.shape))
             model.out.bias.data.copy_(torch.from_numpy(init[n.input[2]].copy()).reshape(-1))
             done.add("out")
@@ -201,13 +204,19 @@ def from_onnx(path, sub=2):
         mod_name = ".".join([scope[0]] + [p.split(".")[-1] for p in scope[1:]])
         w, bias = torch.from_numpy(init[n.input[1]].copy()), torch.from_numpy(init[n.input[2]].copy())
         if mod_name == "out":
+            if w.shape != model.out.weight.shape:
+                raise SystemExit(f"{path}: head convolution {tuple(w.shape)}, FishDet(sub={sub}) has "
+                                 f"{tuple(model.out.weight.shape)} (trained with another --det-sub?)")
             model.out.weight.data.copy_(w)
             model.out.bias.data.copy_(bias)
             done.add("out")
             continue
-        parent, idx = mod_name.rsplit(".", 1)
-        conv_m = mods[mod_name]
-        bn = mods[f"{parent}.{int(idx) + 1}"]
+        parent, _, idx = mod_name.rpartition(".")
+        conv_m = mods.get(mod_name)
+        bn = mods.get(f"{parent}.{int(idx) + 1}") if idx.isdigit() else None
+        if not isinstance(conv_m, nn.Conv2d) or not isinstance(bn, nn.BatchNorm2d) or conv_m.weight.shape != w.shape:
+            raise SystemExit(f"{path}: node {n.name} (weights {tuple(w.shape)}) has no matching convolution in "
+                             f"FishDet(sub={sub}) (not a FishDet export?)")
         conv_m.weight.data.copy_(w)
         bn.eps = 0.0
         bn.running_mean.zero_()
@@ -219,6 +228,7 @@ def from_onnx(path, sub=2):
     if missing:
         raise SystemExit(f"{path}: no weights for {missing} (not a FishDet export with sub={sub}?)")
     return model.eval()
+
 
 # Regression samples (TTFNet, Liu et al. 2020): besides its centre cell, every cell where a fish's
 # heat-map Gaussian is at least REG_GAUSS_MIN regresses that fish's box, weighted by the Gaussian and

@@ -3,7 +3,7 @@
 
     python train.py --data DATA_DIR --models ../models [--det-epochs N] [--depth-epochs N]
     python train.py --data DATA_DIR --requantize [--skip depth]   # re-quantise the fp32 files only
-    python train.py --data DATA_DIR --reexport --skip depth       # re-export the detector's graph, then re-quantise
+    python train.py --data DATA_DIR --reexport [--skip depth]     # rebuild the fp32 graphs from their weights, re-quantise
 
 DATA_DIR/train and DATA_DIR/val hold fme sequences (made by train.sh with `fme synth`).
 Writes models/fish_det_{fp32,int8}.onnx, models/fish_depth_{fp32,int8}.onnx and
@@ -16,6 +16,7 @@ import shutil
 import time
 
 import numpy as np
+import onnx
 import torch
 from onnxruntime.quantization import QuantType
 
@@ -216,6 +217,10 @@ def training_record(metrics, key, fp32, log):
         raise SystemExit(f"--requantize: {fp32} does not exist (train it first)")
     if key not in metrics or "train_seconds" not in metrics[key]:
         raise SystemExit(f"--requantize: the metrics file has no training record for the {key} ({fp32})")
+    dims = [d.dim_value for d in onnx.load(fp32).graph.input[0].type.tensor_type.shape.dim]
+    if dims[2:] != [data.NET_H, data.NET_W]:
+        raise SystemExit(f"--requantize: {fp32} takes {dims[3]}x{dims[2]} input but FME_NET gives "
+                         f"{data.NET_W}x{data.NET_H}; run with FME_NET={dims[3]}x{dims[2]}")
     log(f"{key}: re-quantising {fp32} (not trained again; training record kept)")
     return {k: v for k, v in metrics[key].items() if k not in MEASURED_KEYS}
 
