@@ -219,12 +219,13 @@ def fast_tail(path):
     g = m.graph
     nodes = list(g.node)
     sp = [n for n in nodes if n.op_type == "Softplus"]
-    conv = [n for n in nodes if n.op_type == "Conv"][-1]
+    convs = [n for n in nodes if n.op_type == "Conv"]
     init = {i.name: i for i in g.initializer}
-    if not sp and any(a.name == "group" and a.i > 1 for a in conv.attribute):
+    if convs and not sp and any(a.name == "group" and a.i > 1 for a in convs[-1].attribute):
         return False
-    if len(sp) != 1 or conv.input[1] not in init:
-        raise SystemExit(f"{path}: not a FishDepth export (expected one Softplus after a 1-channel Conv)")
+    if len(sp) != 1 or not convs or len(convs[-1].input) < 3 or any(i not in init for i in convs[-1].input[1:]):
+        raise SystemExit(f"{path}: not a FishDepth export (expected one Softplus after a 1-channel Conv with bias)")
+    conv = convs[-1]
     wt = numpy_helper.to_array(init[conv.input[1]])
     bias = numpy_helper.to_array(init[conv.input[2]])
     if wt.shape[0] != 1:
