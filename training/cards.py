@@ -22,6 +22,12 @@ def budget_note(d):
     return f" (the time budget stopped it in epoch {run})" if run < d["epochs"] else ""
 
 
+def timing_note(d):
+    """The sentence under each card's table: how and on which CPU the timings were taken."""
+    return ("Timings: ONNX Runtime 1.31.1 (Python), batch 1, median of 50 runs after 5 warm-ups, on a 2-vCPU\n"
+            f"{d.get('timed_on', 'Xeon (AVX-512 VNNI)')} shared with other jobs; `make bench-infer` measures the same in fme.")
+
+
 def sub_note(st):
     """The card's sentence for a head with sub-cells (output stride below 4)."""
     if st == 4:
@@ -94,8 +100,7 @@ visibility >= 0.5 must be found, less visible ones are "don't care". NMS IoU 0.7
 |---|---|---|---|---|---|
 {chr(10).join(rows)}
 
-Timings: ONNX Runtime 1.31.1 (Python), batch 1, median of 50 runs after 5 warm-ups, on a 2-vCPU
-{d.get('timed_on', 'Xeon (AVX-512 VNNI)')} shared with other jobs; `make bench-infer` measures the same in fme.
+{timing_note(d)}
 
 ## Licence
 Weights and code: MIT OR Apache-2.0 (this project). Trained only on synthetic frames from fme's own
@@ -155,8 +160,7 @@ median) is compared with the camera z of its body centre.
 |---|---|---|---|---|---|---|
 {chr(10).join(rows)}
 
-Timings: ONNX Runtime 1.31.1 (Python), batch 1, median of 50 runs after 5 warm-ups, on a 2-vCPU
-{d.get('timed_on', 'Xeon (AVX-512 VNNI)')} shared with other jobs; `make bench-infer` measures the same in fme.
+{timing_note(d)}
 
 ## Licence
 MIT OR Apache-2.0 (this project); synthetic training data from fme's own generator only.

@@ -10,6 +10,7 @@ import os
 import cv2
 import numpy as np
 
+
 def parse_size(text, what):
     """'WxH' -> (w, h) positive ints; anything else stops with a message naming `what`."""
     try:

@@ -15,7 +15,8 @@
 # DEPTH_CROP_UNTIL (fraction of the depth run after which it goes on with whole frames, default 1),
 # TRAIN_SEQS (sequences rendered, default 864), DET_SEQS and DEPTH_SEQS (the first N of them each model
 # trains on; default 864 and 288), SKIP (det|depth), NICE (default 10), TRAIN_ARGS (more train.py options;
-# TRAIN_ARGS=--requantize quantises and measures the fp32 files in models/ again without training).
+# TRAIN_ARGS=--requantize quantises and measures the fp32 files in models/ again without training;
+# TRAIN_ARGS=--reexport first rebuilds their graphs from their own weights as an export does now).
 set -euo pipefail
 HERE=$(cd "$(dirname "$0")" && pwd)
 ROOT=$(cd "$HERE/.." && pwd)
