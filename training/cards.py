@@ -24,8 +24,10 @@ def budget_note(d):
 
 def timing_note(d):
     """The sentence under each card's table: how and on which CPU the timings were taken."""
-    return ("Timings: ONNX Runtime 1.31.1 (Python), batch 1, median of 50 runs after 5 warm-ups, on a 2-vCPU\n"
-            f"{d.get('timed_on', 'Xeon (AVX-512 VNNI)')} shared with other jobs; `make bench-infer` measures the same in fme.")
+    return ("Timings: ONNX Runtime 1.31.1 (Python), batch 1,\n"
+            f"{d.get('timing', 'median of 50 runs after 5 warm-ups')},\n"
+            f"on a 2-vCPU {d.get('timed_on', 'Xeon (AVX-512 VNNI)')} shared with other jobs;\n"
+            "`make bench-infer` measures the same in fme.")
 
 
 def sub_note(st):
@@ -43,7 +45,16 @@ def quant_note(d):
     if d.get("float_stem"):
         first = "the first convolution (it reads the 3-channel image; faster in float here) and\n"
     return (f"\nIn the int8 file {first}the head's last 1x1 convolution (a Gemm on channels-last activations)\n"
-            "and the in-graph decode stay in float.")
+            "and the in-graph decode stay in float." + upsample_note(d))
+
+
+def upsample_note(d):
+    """The int8 file's upsamples, when the kept variant is the one `quant.channels_last_upsample` rewrote."""
+    if d.get("int8_kept") != "u8s8":
+        return ""
+    return ("\nIts nearest 2x upsamples are copies of the uint8 tensor in channels-last order\n"
+            "(`quant.channels_last_upsample`: the same bytes as the Resize they replace,\n"
+            "which ONNX Runtime runs slowly there).")
 
 
 def det_card(m):
@@ -139,7 +150,7 @@ Files: `fish_depth_fp32.onnx` and `fish_depth_int8.onnx` (static int8, QDQ, {d.g
 U-Net-style encoder/decoder with 3x3-conv ReLU blocks (strides 2 to 32), output at half the input
 resolution, softplus. In the exported graph the last convolution (to one channel) is a depthwise
 convolution plus a channel sum, and softplus is Relu(x) + Log(1 + Exp(-|x|)) (`depth.fast_tail`:
-the same map up to float rounding, faster in ONNX Runtime); both stay in float in the int8 file.
+the same map up to float rounding, faster in ONNX Runtime); both stay in float in the int8 file.{upsample_note(d)}
 Trained with MiDaS' scale- and shift-invariant loss (median / mean absolute
 deviation normalisation, 20% trimmed L1, multi-scale gradient matching) on disparity 1/z from the
 generator's depth maps, plus a focus term (untrimmed L1 on the normalised maps over the fish box

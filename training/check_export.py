@@ -6,19 +6,23 @@
 - det.decode_nhwc equals det.decode, bit for bit, given the same head output;
 - the exported detector in ONNX Runtime matches the PyTorch module it came from;
 - depth.fast_tail leaves the depth map as the plain export gives it, up to float rounding, and a
-  second call changes nothing.
+  second call changes nothing;
+- quant.channels_last_upsample rewrites every upsample of both int8 networks and changes no output
+  bit, and a second call finds nothing left to rewrite.
 """
 import os
 import sys
 import tempfile
 
 import numpy as np
+import onnx
 import onnxruntime as ort
 import torch
 import torch.nn.functional as F
 
 import depth
 import det
+import quant
 
 
 def fail(msg):
@@ -92,13 +96,39 @@ def check_depth_tail(tmp):
         fail("depth.fast_tail rewrote an already rewritten graph")
 
 
+def check_upsample(tmp):
+    torch.manual_seed(4)
+    rng = np.random.default_rng(4)
+    calib = [rng.random((3, 96, 160), dtype=np.float32) for _ in range(4)]
+    for name, model, export, inp in (("det", det.FishDet(sub=2).eval(), det.export, "images"),
+                                     ("depth", depth.FishDepth().eval(), depth.export, "image")):
+        fp32 = os.path.join(tmp, f"{name}_up_fp32.onnx")
+        export(model, fp32, 96, 160)
+        plain, fast = os.path.join(tmp, f"{name}_up_plain.onnx"), os.path.join(tmp, f"{name}_up_fast.onnx")
+        quant.quantize(fp32, plain, calib, inp, float_stem=name == "det", upsample_rewrite=False)
+        quant.quantize(fp32, fast, calib, inp, float_stem=name == "det", upsample_rewrite=False)
+        resizes = sum(n.op_type == "Resize" for n in onnx.load(plain).graph.node)
+        done = quant.channels_last_upsample(fast)
+        left = sum(n.op_type == "Resize" for n in onnx.load(fast).graph.node)
+        if resizes == 0 or done != resizes or left:
+            fail(f"channels_last_upsample rewrote {done} of the {name} network's {resizes} upsamples, {left} left")
+        for x in calib:
+            a, b = run_onnx(plain, inp, x[None]), run_onnx(fast, inp, x[None])
+            if not np.array_equal(a, b):
+                fail(f"channels_last_upsample changed the int8 {name} output "
+                     f"(largest difference {np.abs(a - b).max():.3g})")
+        if quant.channels_last_upsample(fast):
+            fail(f"channels_last_upsample rewrote the already rewritten {name} network again")
+
+
 def main():
     check_peak_max()
     check_decode()
     with tempfile.TemporaryDirectory() as tmp:
         check_det_export(tmp)
         check_depth_tail(tmp)
-    print("check_export: detector and depth graph tails match their plain forms")
+        check_upsample(tmp)
+    print("check_export: detector and depth graph tails and upsamples match their plain forms")
 
 
 if __name__ == "__main__":

@@ -232,17 +232,27 @@ def cpu_name():
     return f"{name} ({', '.join(ext)})" if ext else name
 
 
-def time_model(path, threads, runs=50, warmup=5):
+TIMING = "median of 100 runs after 5 warm-ups (the three files taking turns, 10 rounds of 10)"
+
+
+def time_models(paths, threads, rounds=10, runs=10, warmup=5):
+    """{path: (median, 90th percentile) ms} of one frame per run. The files take turns round by round, so
+    a shared machine's slow spells fall on all of them alike and the table compares them fairly."""
     import time
 
-    sess = session(path, threads)
-    i = sess.get_inputs()[0]
-    x = np.random.default_rng(0).random([d if isinstance(d, int) else 1 for d in i.shape], dtype=np.float32)
-    for _ in range(warmup):
-        sess.run(None, {i.name: x})
-    ts = []
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        sess.run(None, {i.name: x})
-        ts.append((time.perf_counter() - t0) * 1000)
-    return float(np.median(ts)), float(np.percentile(ts, 90))
+    feeds = []
+    for path in paths:
+        sess = session(path, threads)
+        i = sess.get_inputs()[0]
+        x = np.random.default_rng(0).random([d if isinstance(d, int) else 1 for d in i.shape], dtype=np.float32)
+        for _ in range(warmup):
+            sess.run(None, {i.name: x})
+        feeds.append((sess, {i.name: x}))
+    ts = [[] for _ in paths]
+    for _ in range(rounds):
+        for (sess, feed), t in zip(feeds, ts):
+            for _ in range(runs):
+                t0 = time.perf_counter()
+                sess.run(None, feed)
+                t.append((time.perf_counter() - t0) * 1000)
+    return {p: (float(np.median(t)), float(np.percentile(t, 90))) for p, t in zip(paths, ts)}

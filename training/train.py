@@ -127,15 +127,16 @@ def main():
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             out = os.path.join(args.models, f"fish_det_int8_{tag}.onnx")
             quant.quantize(fp32, out, calib, "images", act, float_stem=True)
-        res["timed_on"] = evaluate.cpu_name()
-        for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
-            path = os.path.join(args.models, f"fish_det_{tag}.onnx")
+        res["timed_on"], res["timing"] = evaluate.cpu_name(), evaluate.TIMING
+        paths = {tag: os.path.join(args.models, f"fish_det_{tag}.onnx") for tag in ("fp32", "int8_u8s8", "int8_s8s8")}
+        ms = {th: evaluate.time_models(list(paths.values()), th) for th in (1, 2)}
+        for tag, path in paths.items():
             sess = evaluate.session(path)
             sweep = evaluate.sweep_conf(sess, va_images, va_boxes)
             res[tag] = {
                 "size_mb": round(os.path.getsize(path) / 1e6, 2),
-                "ms_1_thread": evaluate.time_model(path, 1),
-                "ms_2_threads": evaluate.time_model(path, 2),
+                "ms_1_thread": ms[1][path],
+                "ms_2_threads": ms[2][path],
                 "quality": sweep,
             }
             best = max(sweep, key=lambda m: 2 * m["precision"] * m["recall"] / max(m["precision"] + m["recall"], 1e-9))
@@ -174,15 +175,16 @@ def main():
         calib = [depth.to_input(tr_images[i]) for i in calib_idx]
         for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
             quant.quantize(fp32, os.path.join(args.models, f"fish_depth_int8_{tag}.onnx"), calib, "image", act)
-        res["timed_on"] = evaluate.cpu_name()
-        for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
-            path = os.path.join(args.models, f"fish_depth_{tag}.onnx")
+        res["timed_on"], res["timing"] = evaluate.cpu_name(), evaluate.TIMING
+        paths = {tag: os.path.join(args.models, f"fish_depth_{tag}.onnx") for tag in ("fp32", "int8_u8s8", "int8_s8s8")}
+        ms = {th: evaluate.time_models(list(paths.values()), th) for th in (1, 2)}
+        for tag, path in paths.items():
             sess = evaluate.session(path)
             q = evaluate.eval_depth(sess, va_paths)
             res[tag] = {
                 "size_mb": round(os.path.getsize(path) / 1e6, 2),
-                "ms_1_thread": evaluate.time_model(path, 1),
-                "ms_2_threads": evaluate.time_model(path, 2),
+                "ms_1_thread": ms[1][path],
+                "ms_2_threads": ms[2][path],
                 "quality": q,
             }
             log(f"depth {tag}: {res[tag]['size_mb']} MB, 2 threads {res[tag]['ms_2_threads'][0]:.2f} ms, "
