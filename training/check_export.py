@@ -11,6 +11,7 @@
   bit, and a second call finds nothing left to rewrite.
 """
 import os
+import shutil
 import sys
 import tempfile
 
@@ -106,7 +107,7 @@ def check_upsample(tmp):
         export(model, fp32, 96, 160)
         plain, fast = os.path.join(tmp, f"{name}_up_plain.onnx"), os.path.join(tmp, f"{name}_up_fast.onnx")
         quant.quantize(fp32, plain, calib, inp, float_stem=name == "det", upsample_rewrite=False)
-        quant.quantize(fp32, fast, calib, inp, float_stem=name == "det", upsample_rewrite=False)
+        shutil.copyfile(plain, fast)
         resizes = sum(n.op_type == "Resize" for n in onnx.load(plain).graph.node)
         done = quant.channels_last_upsample(fast)
         left = sum(n.op_type == "Resize" for n in onnx.load(fast).graph.node)

@@ -86,7 +86,7 @@ def channels_last_upsample(path):
 
     rewritten, drop = 0, set()
     for node in list(g.node):
-        if node.op_type != "Resize" or not node.input[0] in producer or len(consumers.get(node.output[0], [])) != 1:
+        if node.op_type != "Resize" or node.input[0] not in producer or len(consumers.get(node.output[0], [])) != 1:
             continue
         dq, q = producer[node.input[0]], consumers[node.output[0]][0]
         shape_in, shape_out = shapes.get(node.input[0], []), shapes.get(node.output[0], [])
@@ -98,7 +98,7 @@ def channels_last_upsample(path):
                 or len(shape_in) != 4 or 0 in shape_in
                 or shape_out != [shape_in[0], shape_in[1], 2 * shape_in[2], 2 * shape_in[3]]):
             continue
-        n, c, h, w = shape_in
+        batch, c, h, w = shape_in
         p = node.name.strip("/").replace("/", "_") or f"upsample{rewritten}"
 
         def dims(name, values):
@@ -107,9 +107,9 @@ def channels_last_upsample(path):
 
         chain = [helper.make_node("Transpose", [dq.input[0]], [f"{p}_nhwc"], perm=[0, 2, 3, 1]),
                  helper.make_node("Concat", [f"{p}_nhwc", f"{p}_nhwc"], [f"{p}_cols"], axis=3),
-                 helper.make_node("Reshape", [f"{p}_cols", dims("row_shape", [n, h, 1, 2 * w * c])], [f"{p}_row"]),
+                 helper.make_node("Reshape", [f"{p}_cols", dims("row_shape", [batch, h, 1, 2 * w * c])], [f"{p}_row"]),
                  helper.make_node("Concat", [f"{p}_row", f"{p}_row"], [f"{p}_rows"], axis=2),
-                 helper.make_node("Reshape", [f"{p}_rows", dims("nhwc_shape", [n, 2 * h, 2 * w, c])], [f"{p}_up"]),
+                 helper.make_node("Reshape", [f"{p}_rows", dims("nhwc_shape", [batch, 2 * h, 2 * w, c])], [f"{p}_up"]),
                  helper.make_node("Transpose", [f"{p}_up"], [q.output[0]], perm=[0, 3, 1, 2])]
         at = list(g.node).index(node)
         for k, new in enumerate(chain):
@@ -131,6 +131,8 @@ def channels_last_upsample(path):
 
 
 def quantize(fp32, out, calib, input_name, act=QuantType.QUInt8, float_stem=False, upsample_rewrite=True):
+    """Writes the int8 QDQ file `out` from `fp32`, calibrated on `calib` (CHW float frames); returns how many
+    upsamples `channels_last_upsample` rewrote in it (0 for int8 activations or upsample_rewrite=False)."""
     pre = out + ".pre.onnx"
     quant_pre_process(fp32, pre, skip_symbolic_shape=True)
     exclude = tail_nodes(pre)
@@ -140,6 +142,4 @@ def quantize(fp32, out, calib, input_name, act=QuantType.QUInt8, float_stem=Fals
                     weight_type=QuantType.QInt8, per_channel=True, calibrate_method=CalibrationMethod.MinMax,
                     nodes_to_exclude=exclude)
     os.remove(pre)
-    if upsample_rewrite and act == QuantType.QUInt8:
-        channels_last_upsample(out)
-    return exclude
+    return channels_last_upsample(out) if upsample_rewrite and act == QuantType.QUInt8 else 0
