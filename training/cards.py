@@ -52,7 +52,7 @@ def upsample_note(d):
     """The int8 file's upsamples, when `quant.channels_last_upsample` rewrote those of the kept variant."""
     if not d.get(f"int8_{d.get('int8_kept')}_upsamples_rewritten"):
         return ""
-    return ("\nIts nearest 2x upsamples are copies of the uint8 tensor in channels-last order\n"
+    return ("\nThe int8 file's nearest 2x upsamples are copies of the uint8 tensor in channels-last order\n"
             "(`quant.channels_last_upsample`: the same bytes as the Resize they replace,\n"
             "which ONNX Runtime runs slowly there).")
 
