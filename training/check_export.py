@@ -30,10 +30,14 @@ def fail(msg):
     raise SystemExit(f"check_export: {msg}")
 
 
-def run_onnx(path, name, x):
+def session(path):
     so = ort.SessionOptions()
     so.intra_op_num_threads = 1
-    return ort.InferenceSession(path, so, providers=["CPUExecutionProvider"]).run(None, {name: x})[0]
+    return ort.InferenceSession(path, so, providers=["CPUExecutionProvider"])
+
+
+def run_onnx(path, name, x):
+    return session(path).run(None, {name: x})[0]
 
 
 def check_peak_max():
@@ -113,8 +117,9 @@ def check_upsample(tmp):
         left = sum(n.op_type == "Resize" for n in onnx.load(fast).graph.node)
         if resizes == 0 or done != resizes or left:
             fail(f"channels_last_upsample rewrote {done} of the {name} network's {resizes} upsamples, {left} left")
+        sa, sb = session(plain), session(fast)
         for x in calib:
-            a, b = run_onnx(plain, inp, x[None]), run_onnx(fast, inp, x[None])
+            a, b = sa.run(None, {inp: x[None]})[0], sb.run(None, {inp: x[None]})[0]
             if not np.array_equal(a, b):
                 fail(f"channels_last_upsample changed the int8 {name} output "
                      f"(largest difference {np.abs(a - b).max():.3g})")

@@ -186,15 +186,19 @@ def from_onnx(path, sub=2):
     model = FishDet(sub=sub)
     mods = dict(model.named_modules())
     done = set()
+
+    def set_head(w, bias, what):  # the head's 1x1 convolution, [out, in] as a Gemm or [out, in, 1, 1] as a Conv
+        want = tuple(model.out.weight.shape)
+        if w.shape not in (want, want[:2]):
+            raise SystemExit(f"{path}: {what} weights {tuple(w.shape)}, FishDet(sub={sub}) has {want[:2]} "
+                             "(trained with another --det-sub?)")
+        model.out.weight.data.copy_(torch.from_numpy(w.reshape(want).copy()))
+        model.out.bias.data.copy_(torch.from_numpy(bias.reshape(-1).copy()))
+        done.add("out")
+
     for n in m.graph.node:
         if n.op_type == "Gemm" and n.input[0] in init:  # `decode_nhwc`'s head: Gemm(out.weight, y^T, out.bias)
-            w = torch.from_numpy(init[n.input[0]].copy())
-            if w.numel() != model.out.weight.numel():
-                raise SystemExit(f"{path}: head Gemm weights {tuple(w.shape)}, FishDet(sub={sub}) has "
-                                 f"{tuple(model.out.weight.shape[:2])} (trained with another --det-sub?)")
-            model.out.weight.data.copy_(w.reshape(model.out.weight.shape))
-            model.out.bias.data.copy_(torch.from_numpy(init[n.input[2]].copy()).reshape(-1))
-            done.add("out")
+            set_head(init[n.input[0]], init[n.input[2]], "head Gemm")
             continue
         if n.op_type != "Conv":
             continue
@@ -202,15 +206,10 @@ def from_onnx(path, sub=2):
         # name as a prefix); its BatchNorm is the next child, "s4.1.a.1".
         scope = n.name.strip("/").split("/")[:-1]
         mod_name = ".".join([scope[0]] + [p.split(".")[-1] for p in scope[1:]])
-        w, bias = torch.from_numpy(init[n.input[1]].copy()), torch.from_numpy(init[n.input[2]].copy())
         if mod_name == "out":
-            if w.shape != model.out.weight.shape:
-                raise SystemExit(f"{path}: head convolution {tuple(w.shape)}, FishDet(sub={sub}) has "
-                                 f"{tuple(model.out.weight.shape)} (trained with another --det-sub?)")
-            model.out.weight.data.copy_(w)
-            model.out.bias.data.copy_(bias)
-            done.add("out")
+            set_head(init[n.input[1]], init[n.input[2]], "head convolution")
             continue
+        w, bias = torch.from_numpy(init[n.input[1]].copy()), torch.from_numpy(init[n.input[2]].copy())
         parent, _, idx = mod_name.rpartition(".")
         conv_m = mods.get(mod_name)
         bn = mods.get(f"{parent}.{int(idx) + 1}") if idx.isdigit() else None

@@ -124,12 +124,7 @@ def main():
                    "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
         calib = [tr_images[i].astype(np.float32).transpose(2, 0, 1) / 255.0 for i in calib_idx]
         res["float_stem"] = True
-        for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
-            out = os.path.join(args.models, f"fish_det_int8_{tag}.onnx")
-            res[f"int8_{tag}_upsamples_rewritten"] = quant.quantize(fp32, out, calib, "images", act, float_stem=True)
-        res["timed_on"], res["timing"] = evaluate.cpu_name(), evaluate.TIMING
-        paths = {tag: os.path.join(args.models, f"fish_det_{tag}.onnx") for tag in ("fp32", "int8_u8s8", "int8_s8s8")}
-        ms = {th: evaluate.time_models(list(paths.values()), th) for th in (1, 2)}
+        paths, ms = quantize_and_time(args.models, "fish_det", fp32, calib, "images", res, float_stem=True)
         for tag, path in paths.items():
             sess = evaluate.session(path)
             sweep = evaluate.sweep_conf(sess, va_images, va_boxes)
@@ -173,12 +168,7 @@ def main():
                 res["train_crop"] = list(depth_crop)
                 res["train_crop_until"] = args.depth_crop_until
         calib = [depth.to_input(tr_images[i]) for i in calib_idx]
-        for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
-            out = os.path.join(args.models, f"fish_depth_int8_{tag}.onnx")
-            res[f"int8_{tag}_upsamples_rewritten"] = quant.quantize(fp32, out, calib, "image", act)
-        res["timed_on"], res["timing"] = evaluate.cpu_name(), evaluate.TIMING
-        paths = {tag: os.path.join(args.models, f"fish_depth_{tag}.onnx") for tag in ("fp32", "int8_u8s8", "int8_s8s8")}
-        ms = {th: evaluate.time_models(list(paths.values()), th) for th in (1, 2)}
+        paths, ms = quantize_and_time(args.models, "fish_depth", fp32, calib, "image", res)
         for tag, path in paths.items():
             sess = evaluate.session(path)
             q = evaluate.eval_depth(sess, va_paths)
@@ -209,8 +199,21 @@ def main():
         cards.main_with(metrics)
 
 
+def quantize_and_time(models, stem, fp32, calib, input_name, res, **quant_args):
+    """Writes <stem>_int8_u8s8.onnx and <stem>_int8_s8s8.onnx from `fp32`, records in `res` how many
+    upsamples each had rewritten and where and how the files were timed; returns {tag: path} of the
+    three files and their timings {threads: {path: (median, p90) ms}}, the files taking turns."""
+    for tag, act in (("u8s8", QuantType.QUInt8), ("s8s8", QuantType.QInt8)):
+        out = os.path.join(models, f"{stem}_int8_{tag}.onnx")
+        res[f"int8_{tag}_upsamples_rewritten"] = quant.quantize(fp32, out, calib, input_name, act, **quant_args)
+    res["timed_on"], res["timing"] = evaluate.cpu_name(), evaluate.TIMING
+    paths = {tag: os.path.join(models, f"{stem}_{tag}.onnx") for tag in ("fp32", "int8_u8s8", "int8_s8s8")}
+    return paths, {th: evaluate.time_models(list(paths.values()), th) for th in (1, 2)}
+
+
 # What a measurement re-computes; everything else in a model's metrics is its training record.
-MEASURED_KEYS = ("fp32", "int8_u8s8", "int8_s8s8", "int8_kept", "float_stem", "timed_on")
+MEASURED_KEYS = ("fp32", "int8_u8s8", "int8_s8s8", "int8_kept", "float_stem", "timed_on", "timing",
+                 "int8_u8s8_upsamples_rewritten", "int8_s8s8_upsamples_rewritten")
 
 
 def training_record(metrics, key, fp32, log):
