@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # The paper's four groups (Tables 6 and 7) with fme's bundled models, on held-out sequences (seeds
-# never used for training: training uses 1000..1575 (the depth network 1000..1287), its held-out check 9000..9013):
+# never used for training: training uses 1000..1863 (the depth network 1000..1287), its held-out check 9000..9013):
 #   A  GT boxes + GT depth          B  GT boxes + estimated depth (depth network + robust fit, layout F)
 #   C  predicted boxes + GT depth   D  predicted boxes + estimated depth (detector + tracker + depth network)
 # on single-fish and swarm sequences (30 s each). Prints a table; JSON per run in OUT/results-SEED_BASE.
 # Usage: scripts/four_groups.sh [OUT_DIR]   (default target/four-groups). FME overrides the binary.
 # SEED_BASE (default 7021) picks the set: seeds B, B+1 (single fish), B+10..B+12 (swarms); 7041 is a
-# second set, used for one choice only (leaving hidden fish out in `depth.sample = "visible"`; 7021's was used
-# to choose the depth loss's focus weight and the visible-point threshold).
+# second set, used for two choices only (leaving hidden fish out in `depth.sample = "visible"`, and with 7021 the
+# threshold for a fish seen behind another; 7021's was used to choose the depth loss's focus weight and the
+# visible-point threshold); 7061 and 7081 are further sets, only checked on.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-target/four-groups}

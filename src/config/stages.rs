@@ -72,7 +72,8 @@ pub struct DepthConfig {
     /// Metric fit of relative inverse depth (paper eq. 2): `linear`, `inverse` or `robust`.
     pub fit: crate::metric::FitMethod,
     /// How a fish's depth is read from the map: `visible` (nearest quarter of the central half of its
-    /// box, where no other fish's box covers it; none for a hidden fish), `box` (the same over the
+    /// box, where no other fish's box covers it; none for a hidden fish, or one seen behind another
+    /// with little of it left), `box` (the same over the
     /// whole core) or `centre` (the paper's choice). See [`crate::metric::DepthSample`].
     pub sample: crate::metric::DepthSample,
     /// Input normalisation: channel means (R, G, B) after `/255` (ImageNet; `[0, 0, 0]` for the

@@ -22,8 +22,8 @@ mod sample;
 pub use fit::{DepthModel, FitError, FitMethod, ROBUST_INLIER, ReferencePair, References, ScaleShift, fit, fit_robust};
 pub use references::{ReferenceFootprints, ReferencePoints};
 pub use sample::{
-    CORE_FRAC, DepthSample, MAX_OVERLAPS, MAX_RADIUS, MIN_VISIBLE_POINTS, MapKind, Overlaps, RelativeMap,
-    sample_box_quantile, sample_box_quantile_visible, sample_fish, sample_median,
+    CORE_FRAC, DepthSample, MAX_OVERLAPS, MAX_RADIUS, MIN_VISIBLE_POINTS, MIN_VISIBLE_POINTS_BEHIND, MapKind, Overlaps,
+    RelativeMap, behind_a_nearer_fish, sample_box_quantile, sample_box_quantile_visible, sample_fish, sample_median,
 };
 
 /// Most reference objects a scene may have (the paper uses ten).
