@@ -454,6 +454,16 @@ mod tests {
         let (metres, a, b) = overlapping_fish(2.0, 2.0);
         let m = RelativeMap::new(&metres, 20, 20).unwrap();
         assert_eq!((visible(&a, &b, MapKind::Depth, &m), visible(&b, &a, MapKind::Depth, &m)), (Some(2.0), Some(2.0)));
+        // A in front (2.5 m where seen, 2 m at x 7..12, inside B's core): B is read less A's box,
+        // at 3 m, so A is not taken for a fish behind B because of its own pixels.
+        let (mut metres, a, b) = overlapping_fish(2.5, 3.0);
+        for y in 4..16 {
+            for x in 7..12 {
+                metres[y * 20 + x] = 2.0;
+            }
+        }
+        let m = RelativeMap::new(&metres, 20, 20).unwrap();
+        assert_eq!(visible(&a, &b, MapKind::Depth, &m), Some(2.5));
     }
 
     #[test]
