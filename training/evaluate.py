@@ -232,10 +232,12 @@ def cpu_name():
     return f"{name} ({', '.join(ext)})" if ext else name
 
 
-TIMING = "median of 100 runs after 5 warm-ups (the three files taking turns, 10 rounds of 10)"
+ROUNDS, RUNS, WARMUP = 10, 10, 5
+TIMING = (f"median of {ROUNDS * RUNS} runs after {WARMUP} warm-ups "
+          f"(the three files taking turns, {ROUNDS} rounds of {RUNS})")
 
 
-def time_models(paths, threads, rounds=10, runs=10, warmup=5):
+def time_models(paths, threads, rounds=ROUNDS, runs=RUNS, warmup=WARMUP):
     """{path: (median, 90th percentile) ms} of one frame per run. The files take turns round by round, so
     a shared machine's slow spells fall on all of them alike and the table compares them fairly."""
     import time
