@@ -2,7 +2,7 @@
 //! the daemon runs on every frame. `cargo bench --bench core` (or `make bench-core`).
 
 use fme::geometry::{Camera, Intrinsics, PixelBox, Pose, WorldPoint};
-use fme::motion::{ActivityEstimator, MotionConfig, TrackObservation};
+use fme::motion::{ActivityEstimator, AlongRay, MotionConfig, TrackObservation};
 use fme::postprocess::PostprocessConfig;
 use fme::units::{Metres, Seconds};
 use std::hint::black_box;
@@ -23,11 +23,12 @@ fn frame(i: usize, n: u32, obs: &mut Vec<TrackObservation>) -> Seconds {
     Seconds(t)
 }
 
-fn run(label: &str, n: u32, post: PostprocessConfig) {
+fn run(label: &str, n: u32, post: PostprocessConfig, along_ray: AlongRay) {
+    let motion = MotionConfig { along_ray, ..MotionConfig::default() };
     let k = Intrinsics::from_hfov(640, 384, 80.0).expect("valid intrinsics");
     let pose = Pose::look_at(WorldPoint::new(3.0, -0.5, 1.5), WorldPoint::new(3.0, 3.0, 1.2), nalgebra::Vector3::z())
         .expect("valid pose");
-    let mut est = ActivityEstimator::new(Camera { intrinsics: k, pose }, MotionConfig::default(), post);
+    let mut est = ActivityEstimator::new(Camera { intrinsics: k, pose }, motion, post);
     let frames = 3000;
     // Pre-build the inputs so only the estimator is timed.
     let mut inputs: Vec<(Seconds, Vec<TrackObservation>)> = Vec::with_capacity(frames);
@@ -44,7 +45,7 @@ fn run(label: &str, n: u32, post: PostprocessConfig) {
     let reps = 5;
     for rep in 0..reps {
         // Fresh estimator per repetition, warmed on 100 frames; time the remaining frames.
-        let mut e = ActivityEstimator::new(*est.camera(), MotionConfig::default(), post);
+        let mut e = ActivityEstimator::new(*est.camera(), motion, post);
         for (t, obs) in inputs.iter().take(100) {
             black_box(e.update(*t, obs));
         }
@@ -58,7 +59,7 @@ fn run(label: &str, n: u32, post: PostprocessConfig) {
         let _ = rep;
     }
     println!(
-        "{label:34} {n:4} tracks: {:8.2} us/frame best, {:8.2} us/frame mean of {reps} ({:.0} ns/track)",
+        "{label:38} {n:4} tracks: {:8.2} us/frame best, {:8.2} us/frame mean of {reps} ({:.0} ns/track)",
         best * 1e6,
         total / reps as f64 * 1e6,
         best * 1e9 / n as f64
@@ -72,9 +73,14 @@ fn main() {
         println!("core benchmark: run it with `cargo bench --bench core` (make bench-core)");
         return;
     }
-    run("postprocess (eq. 3+4) + motion", 100, PostprocessConfig::paper());
-    run("postprocess (default: eq. 4) + motion", 100, PostprocessConfig::default());
-    run("motion only (postprocess off)", 100, PostprocessConfig::off());
-    run("postprocess (eq. 3+4) + motion", 20, PostprocessConfig::paper());
-    run("postprocess (eq. 3+4) + motion", 250, PostprocessConfig::paper());
+    // Each line twice: the speed along the line of sight from the depth change (the paper) and from
+    // the heading (the default), so their costs compare on one machine in one run.
+    for (name, along_ray) in [("depth", AlongRay::Depth), ("heading", AlongRay::Heading)] {
+        let label = |what: &str| format!("{what}, {name}");
+        run(&label("postprocess (eq. 3+4) + motion"), 100, PostprocessConfig::paper(), along_ray);
+        run(&label("postprocess (eq. 4) + motion"), 100, PostprocessConfig::default(), along_ray);
+        run(&label("motion only"), 100, PostprocessConfig::off(), along_ray);
+        run(&label("postprocess (eq. 3+4) + motion"), 20, PostprocessConfig::paper(), along_ray);
+        run(&label("postprocess (eq. 3+4) + motion"), 250, PostprocessConfig::paper(), along_ray);
+    }
 }

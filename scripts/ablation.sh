@@ -17,7 +17,10 @@ SYNTH_FME=${SYNTH_FME:-$FME}   # a binary with `fme synth` (branch synth until m
 [ -x "$FME" ] || cargo build --release --locked --bin fme
 mkdir -p "$OUT"
 synth() { local out=$1; shift; [ -f "$out/seqinfo.ini" ] || [ -d "$out" -a "$2" = postproc-suite ] || "$SYNTH_FME" synth --out "$out" --force "$@" >/dev/null; }
-ev() { "$FME" eval --json "$@"; }
+# The README's tables were measured before the heading method (motion.along_ray = "heading", README
+# "Speed from the heading"); ALONG_RAY=heading runs today's default instead.
+ALONG_RAY=${ALONG_RAY:-depth}
+ev() { "$FME" eval --json --along-ray "$ALONG_RAY" "$@"; }
 # The paper's settings (frame-to-frame speed, eq. 3 and eq. 4 on) and fme's measured choice.
 TUNED=()   # the defaults: 1 s chord speed, eq. 4 on, eq. 3 off
 

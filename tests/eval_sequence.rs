@@ -164,13 +164,23 @@ fn fme() -> Command {
     Command::new(env!("CARGO_BIN_EXE_fme"))
 }
 
+/// The boxes written here keep one size whatever way the fish swims (they are not drawn as swimming
+/// fish), so tests that check exact speeds take the speed along the line of sight from the depth, as
+/// the paper does (`motion.along_ray = "depth"`); `tests/eval_recorded.rs` checks the heading method
+/// on rendered fish.
+fn depth_chord() -> EvalOptions {
+    let mut opts = EvalOptions::default();
+    opts.motion.along_ray = fme::motion::AlongRay::Depth;
+    opts
+}
+
 #[test]
 fn gt_boxes_and_gt_depth_recover_known_speeds() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("seq");
     write_sequence(&dir);
     let seq = Sequence::open(&dir).unwrap();
-    let r = evaluate(&seq, &EvalOptions::default()).unwrap();
+    let r = evaluate(&seq, &depth_chord()).unwrap();
     assert_eq!(r.frames, (N - 1) as usize);
     // True mean speed: (0.4 + |(-0.2, 0.3, 0.1)| + |(0.1, -0.25, 0)|) / 3, constant.
     let truth = (0.4 + (0.04f64 + 0.09 + 0.01).sqrt() + (0.01f64 + 0.0625).sqrt()) / 3.0;
@@ -188,7 +198,7 @@ fn tracker_boxes_are_scored_for_tracking_and_speed() {
     let dir = tmp.path().join("seq");
     write_sequence(&dir);
     let seq = Sequence::open(&dir).unwrap();
-    let opts = EvalOptions { boxes: fme::eval::BoxesChoice::Tracker, ..Default::default() };
+    let opts = EvalOptions { boxes: fme::eval::BoxesChoice::Tracker, ..depth_chord() };
     let r = evaluate(&seq, &opts).unwrap();
     let m = r.mot.expect("tracking metrics for --boxes tracker");
     // Three well separated fish, 5% misses and jitter: the tracker keeps them apart.
@@ -200,7 +210,7 @@ fn tracker_boxes_are_scored_for_tracking_and_speed() {
     }
     let truth = (0.4 + (0.04f64 + 0.09 + 0.01).sqrt() + (0.01f64 + 0.0625).sqrt()) / 3.0;
     assert!((r.mean_est_mps - truth).abs() < 0.05, "{}", summary(&r));
-    let gt = evaluate(&seq, &EvalOptions::default()).unwrap();
+    let gt = evaluate(&seq, &depth_chord()).unwrap();
     assert!(r.speed_rmse_mps > gt.speed_rmse_mps * 0.5, "noisy detections cannot beat ground truth by much");
 }
 
@@ -221,7 +231,7 @@ fn post_processing_removes_box_fluctuation() {
 /// Ground-truth depth made relative without noise, then the inverse fit: the depth path with
 /// nothing in it that is not exact.
 fn exact_relative_gt() -> EvalOptions {
-    let mut opts = EvalOptions { depth: DepthChoice::RelativeGt, fit: FitChoice::Inverse, ..Default::default() };
+    let mut opts = EvalOptions { depth: DepthChoice::RelativeGt, fit: FitChoice::Inverse, ..depth_chord() };
     opts.relative.pixel_noise = 0.0;
     opts.relative.low_freq = 0.0;
     opts
@@ -318,7 +328,13 @@ fn cli_tracks_rows_follow_each_fish() {
     let dir = tmp.path().join("seq");
     write_sequence(&dir);
     let tracks = tmp.path().join("t.csv");
-    let out = fme().args(["eval", "--json", "--sequence"]).arg(&dir).arg("--tracks").arg(&tracks).output().unwrap();
+    let out = fme()
+        .args(["eval", "--json", "--along-ray", "depth", "--sequence"])
+        .arg(&dir)
+        .arg("--tracks")
+        .arg(&tracks)
+        .output()
+        .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let csv = std::fs::read_to_string(&tracks).unwrap();
     let mut lines = csv.lines();

@@ -4,7 +4,7 @@ use crate::eval::{
     BoxesChoice, DepthChoice, DepthSample, EvalOptions, EvalReport, FitChoice, evaluate, plot, write_series,
     write_tracks,
 };
-use crate::motion::SpeedMethod;
+use crate::motion::{AlongRay, SpeedMethod};
 use crate::postprocess::{BoxAnchor, PostprocessConfig};
 use crate::sequence::Sequence;
 use crate::units::MetresPerSecond;
@@ -47,7 +47,8 @@ pub struct EvalArgs {
     /// Speed span in seconds (0 = frame to frame, the paper's choice; default 1).
     #[arg(long)]
     pub speed_span: Option<f64>,
-    /// The paper's settings: frame-to-frame speed, eq. 3 and eq. 4 on (other flags still apply).
+    /// The paper's settings: frame-to-frame speed from the depth change, eq. 3 and eq. 4 on (other flags
+    /// still apply).
     #[arg(long)]
     pub paper: bool,
     /// Turn the box-fluctuation detector (eq. 3) on (off by default: it raised the RMSE in our measurements).
@@ -61,6 +62,11 @@ pub struct EvalArgs {
     /// Speed from the chord over the span (the paper, with span 0) or a least-squares regression.
     #[arg(long, value_enum, default_value_t = SpeedMethod::Chord)]
     pub speed_method: SpeedMethod,
+    /// Where each fish's speed along the line of sight comes from: `heading` (its speed across the
+    /// image over the box's foreshortening: fish swim head first) or `depth` (the change of its depth,
+    /// the paper). Default `heading`, `depth` with `--paper`.
+    #[arg(long, value_enum)]
+    pub along_ray: Option<AlongRay>,
     /// Per-fish speeds above this (m/s) are glitches left out of the mean.
     #[arg(long, default_value_t = 10.0)]
     pub max_speed: f64,
@@ -218,6 +224,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         opts.motion.speed_span = Seconds(span);
     }
     opts.motion.speed_method = args.speed_method;
+    opts.motion.along_ray = args.along_ray.unwrap_or(if args.paper { AlongRay::Depth } else { opts.motion.along_ray });
     opts.motion.max_speed = MetresPerSecond(args.max_speed);
     opts.postprocess.box_anchor = args.box_anchor;
     opts.postprocess.box_fluctuation =

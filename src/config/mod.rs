@@ -145,6 +145,9 @@ impl Config {
         if !(m.speed_span_s.is_finite() && m.speed_span_s >= 0.0) {
             return err("motion.speed_span_s", format!("must be >= 0 s, got {}", m.speed_span_s));
         }
+        if !(m.body_width_ratio.is_finite() && (0.0..=0.5).contains(&m.body_width_ratio)) {
+            return err("motion.body_width_ratio", format!("must be within 0..=0.5, got {}", m.body_width_ratio));
+        }
         positive("motion.max_speed_mps", m.max_speed_mps)?;
         positive("motion.smoothing_s", self.motion.smoothing_s)?;
         positive("output.rate_hz", self.output.rate_hz)?;

@@ -169,7 +169,8 @@ impl Default for PostprocessConfig {
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct MotionConfig {
-    /// Mean fish body length used for body lengths/s, m; 0 = estimated per fish from box size and depth.
+    /// Mean fish body length used for body lengths/s, m; 0 = estimated per fish
+    /// ([`crate::motion::heading::fish_length`]).
     pub body_length_m: f64,
     /// Fewer tracked fish than this raises the "too few fish" status bit.
     pub min_fish: u32,
@@ -177,6 +178,11 @@ pub struct MotionConfig {
     pub smoothing_s: f64,
     /// Each fish's speed is its displacement over this span, s (0 = frame to frame, as the paper).
     pub speed_span_s: f64,
+    /// Where each fish's speed along the line of sight comes from: `heading` (its speed across the
+    /// image over the box's foreshortening: fish swim head first) or `depth` (its change of depth, the paper).
+    pub along_ray: crate::motion::AlongRay,
+    /// A fish's width over its length as seen head-on (salmon about 0.1), for `along_ray = "heading"`.
+    pub body_width_ratio: f64,
     /// Per-fish speeds above this are glitches and left out of the mean, m/s.
     pub max_speed_mps: f64,
 }
@@ -189,6 +195,8 @@ impl Default for MotionConfig {
             min_fish: 3,
             smoothing_s: 60.0,
             speed_span_s: d.speed_span.0,
+            along_ray: d.along_ray,
+            body_width_ratio: d.body_width_ratio,
             max_speed_mps: d.max_speed.0,
         }
     }

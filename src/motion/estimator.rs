@@ -1,7 +1,11 @@
 //! The per-frame activity estimator (paper section 3.3, eq. 5).
 
+use super::heading::{
+    AlongRay, LengthHistogram, SWARM_LENGTH_MEMORY_S, angle_between, apparent_length, fish_length, foreshortening,
+    speed_from_heading, swarm_floor,
+};
 use super::stats::mean_ci95;
-use crate::geometry::{Camera, Pixel, PixelBox, WorldPoint};
+use crate::geometry::{Camera, CameraPoint, Pixel, PixelBox, WorldPoint};
 use crate::postprocess::{PostprocessConfig, TrackFilter};
 use crate::units::{Metres, MetresPerSecond, Seconds};
 use heapless::Deque;
@@ -23,30 +27,65 @@ pub enum SpeedMethod {
     Regression,
 }
 
-/// Least-squares velocity over the positions within `span` of `t`; `None` for fewer than 3.
-/// Returns the speed and the time it refers to (the window's mean time).
-fn regression_speed(positions: &Deque<(f64, [f64; 3]), POSITIONS>, t: f64, span: f64) -> Option<(f64, f64)> {
-    let inside = || positions.iter().filter(|p| t - p.0 <= span * (1.0 + 1e-6) + 1e-9);
+/// One stored observation of a track.
+#[derive(Debug, Clone, Copy)]
+struct Sample {
+    /// Frame time, s.
+    t: f64,
+    /// Box centre lifted with the corrected depth, camera frame, m (speed norms are the same as in
+    /// the world frame; the camera frame separates motion across and along the line of sight).
+    p: [f64; 3],
+    /// Distance from the camera, m.
+    range: f64,
+    /// Apparent body length ([`apparent_length`]), m; NaN when unknown.
+    apparent: f64,
+}
+
+impl Sample {
+    /// Unit line of sight: what the box motion measures without depth.
+    fn unit(&self) -> [f64; 3] {
+        [self.p[0] / self.range, self.p[1] / self.range, self.p[2] / self.range]
+    }
+}
+
+/// Within `span` of `t` (the same tolerance everywhere).
+fn within(sample: &Sample, t: f64, span: f64) -> bool {
+    t - sample.t <= span * (1.0 + 1e-6) + 1e-9
+}
+
+/// Least-squares velocity of `coords(sample)` over the samples within `span` of `t`; `None` for
+/// fewer than 3. Returns the velocity's norm and the time it refers to (the window's mean time).
+fn regression_speed(
+    samples: &Deque<Sample, POSITIONS>,
+    t: f64,
+    span: f64,
+    coords: impl Fn(&Sample) -> [f64; 3],
+) -> Option<(f64, f64)> {
+    let inside = || samples.iter().filter(|p| within(p, t, span));
     let n = inside().count();
     if n < 3 {
         return None;
     }
-    let tm = inside().map(|p| p.0).sum::<f64>() / n as f64;
+    let tm = inside().map(|p| p.t).sum::<f64>() / n as f64;
     let mut pm = [0.0; 3];
     for p in inside() {
-        for (m, x) in pm.iter_mut().zip(p.1) {
+        for (m, x) in pm.iter_mut().zip(coords(p)) {
             *m += x / n as f64;
         }
     }
     let (mut stt, mut stp) = (0.0, [0.0; 3]);
     for p in inside() {
-        let dt = p.0 - tm;
+        let dt = p.t - tm;
         stt += dt * dt;
-        for ((s, x), m) in stp.iter_mut().zip(p.1).zip(pm) {
+        for ((s, x), m) in stp.iter_mut().zip(coords(p)).zip(pm) {
             *s += dt * (x - m);
         }
     }
     (stt > 0.0).then(|| ((stp[0] * stp[0] + stp[1] * stp[1] + stp[2] * stp[2]).sqrt() / stt, tm))
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 /// Motion settings (the `[motion]` config section).
@@ -55,7 +94,7 @@ fn regression_speed(positions: &Deque<(f64, [f64; 3]), POSITIONS>, t: f64, span:
 pub struct MotionConfig {
     /// Most tracks held at once; the table is allocated once with this size.
     pub max_tracks: usize,
-    /// Fish body length for body lengths/s; `None`: estimated per track from box size and depth.
+    /// Fish body length for body lengths/s; `None`: estimated per track ([`super::heading::fish_length`]).
     pub body_length: Option<Metres>,
     /// Speed is taken over the oldest stored position at most this long ago (at least the previous
     /// one): 0 = frame to frame, as the paper; default 1 s. Longer spans trade latency for less noise
@@ -63,6 +102,12 @@ pub struct MotionConfig {
     pub speed_span: Seconds,
     /// Chord (the paper) or least-squares regression over the span.
     pub speed_method: SpeedMethod,
+    /// Where the speed along the line of sight comes from: the change of depth (the paper) or the
+    /// fish's heading ([`super::heading`]).
+    pub along_ray: AlongRay,
+    /// A fish's width over its length, as seen head-on (salmon about 0.1): the heading method's
+    /// foreshortening model.
+    pub body_width_ratio: f64,
     /// Time constant of the exponential smoothing of the activity index.
     pub smoothing: Seconds,
     /// A track not seen for this long is forgotten (its slot is reused).
@@ -81,6 +126,8 @@ impl Default for MotionConfig {
             // refers to t - 0.5 s (`ActivitySample::latency`).
             speed_span: Seconds(1.0),
             speed_method: SpeedMethod::Chord,
+            along_ray: AlongRay::Heading,
+            body_width_ratio: 0.1,
             smoothing: Seconds(2.0),
             track_timeout: Seconds(1.0),
             max_speed: MetresPerSecond(10.0),
@@ -99,6 +146,9 @@ impl MotionConfig {
         }
         if !(self.speed_span.0.is_finite() && self.speed_span.0 >= 0.0) {
             return Err("motion.speed_span must be zero or a positive number of seconds");
+        }
+        if !(self.body_width_ratio.is_finite() && (0.0..=0.5).contains(&self.body_width_ratio)) {
+            return Err("motion.body_width_ratio must be within 0..=0.5");
         }
         if !(self.smoothing.0.is_finite() && self.smoothing.0 > 0.0) {
             return Err("motion.smoothing must be a positive number of seconds");
@@ -169,7 +219,8 @@ pub struct TrackView {
     pub position: Option<WorldPoint>,
     /// Speed at its last observation.
     pub speed: Option<MetresPerSecond>,
-    /// Body length used for body lengths/s.
+    /// Body length used for body lengths/s: the configured one, else the estimate of
+    /// [`super::heading::fish_length`].
     pub length: Option<Metres>,
 }
 
@@ -178,13 +229,12 @@ struct TrackState {
     id: u32,
     last_seen: f64,
     filter: TrackFilter,
-    positions: Deque<(f64, [f64; 3]), POSITIONS>,
+    positions: Deque<Sample, POSITIONS>,
     bbox: PixelBox,
     depth_measured: Option<Metres>,
     depth: Option<Metres>,
     speed: Option<f64>,
-    length_sum: f64,
-    length_n: u32,
+    lengths: LengthHistogram,
 }
 
 impl TrackState {
@@ -198,8 +248,7 @@ impl TrackState {
             depth_measured: None,
             depth: None,
             speed: None,
-            length_sum: 0.0,
-            length_n: 0,
+            lengths: LengthHistogram::default(),
         }
     }
 }
@@ -212,12 +261,26 @@ pub struct ActivityEstimator {
     post: PostprocessConfig,
     tracks: Vec<TrackState>,
     smoothed: Option<(f64, f64)>,
+    /// Apparent lengths of all fish, decaying with [`SWARM_LENGTH_MEMORY_S`], and when last decayed.
+    swarm_lengths: LengthHistogram,
+    swarm_lengths_t: f64,
+    /// [`swarm_floor`] of `swarm_lengths` at the start of the frame.
+    swarm_floor: Option<Metres>,
 }
 
 impl ActivityEstimator {
     /// An estimator for a calibrated camera. Allocates the track table (`motion.max_tracks`) once.
     pub fn new(camera: Camera, motion: MotionConfig, post: PostprocessConfig) -> Self {
-        Self { camera, motion, post, tracks: Vec::with_capacity(motion.max_tracks), smoothed: None }
+        Self {
+            camera,
+            motion,
+            post,
+            tracks: Vec::with_capacity(motion.max_tracks),
+            smoothed: None,
+            swarm_lengths: LengthHistogram::default(),
+            swarm_lengths_t: f64::NAN,
+            swarm_floor: None,
+        }
     }
 
     /// The camera positions are lifted with.
@@ -243,14 +306,14 @@ impl ActivityEstimator {
             bbox: s.bbox,
             depth_measured: s.depth_measured,
             depth: s.depth,
-            position: s.positions.back().map(|p| WorldPoint::new(p.1[0], p.1[1], p.1[2])),
+            position: s.positions.back().map(|p| self.camera.pose.to_world(&CameraPoint::new(p.p[0], p.p[1], p.p[2]))),
             speed: s.speed.map(MetresPerSecond),
             length: self.length_of(s),
         })
     }
 
     fn length_of(&self, s: &TrackState) -> Option<Metres> {
-        self.motion.body_length.or((s.length_n > 0).then(|| Metres(s.length_sum / s.length_n as f64)))
+        self.motion.body_length.or_else(|| fish_length(&s.lengths, self.swarm_floor))
     }
 
     /// One frame, with the depth carried by each observation (sampled at the raw box centre).
@@ -269,7 +332,16 @@ impl ActivityEstimator {
         let mut out = ActivitySample { t, ..Default::default() };
         let (mut n, mut sum, mut sum_sq, mut lag) = (0usize, 0.0, 0.0, 0.0);
         let (mut n_bl, mut sum_bl) = (0usize, 0.0);
-        let (fx, fy) = (self.camera.intrinsics.fx, self.camera.intrinsics.fy);
+        // The swarm's lengths fade with time, so they follow the fish in view.
+        if t.0.is_finite() {
+            if self.swarm_lengths_t.is_finite() && t.0 > self.swarm_lengths_t {
+                self.swarm_lengths.decay((-(t.0 - self.swarm_lengths_t) / SWARM_LENGTH_MEMORY_S).exp() as f32);
+            }
+            if self.swarm_lengths_t.is_nan() || t.0 > self.swarm_lengths_t {
+                self.swarm_lengths_t = t.0;
+            }
+        }
+        self.swarm_floor = swarm_floor(&self.swarm_lengths);
         // Forget tracks not seen for too long, so their slots can be reused.
         let timeout = self.motion.track_timeout.0;
         self.tracks.retain(|s| t.0 - s.last_seen <= timeout || !t.0.is_finite());
@@ -304,36 +376,61 @@ impl ActivityEstimator {
             out.depths_corrected += jumped as u32;
             s.depth = depth;
             s.speed = None;
-            let Some(world) = depth.and_then(|d| self.camera.pixel_to_world(centre, d).ok()) else {
+            let Some(point) = depth.and_then(|d| self.camera.intrinsics.unproject(centre, d).ok()) else {
                 out.skipped += 1;
                 continue;
             };
-            if let Some(d) = depth {
-                let l = (corr.bbox.w / fx).max(corr.bbox.h / fy) * d.0;
-                if l.is_finite() && l > 0.0 {
-                    s.length_sum += l;
-                    s.length_n = s.length_n.saturating_add(1);
-                }
+            let range = point.range().0;
+            let apparent = apparent_length(&self.camera.intrinsics, &corr.bbox, Metres(range)).0;
+            if apparent.is_finite() && apparent > 0.0 {
+                s.lengths.add(Metres(apparent));
+                self.swarm_lengths.add(Metres(apparent));
             }
             // Reference position: the oldest within the speed span, at least the previous one.
-            while s.positions.front().is_some_and(|p| t.0 - p.0 > timeout) || s.positions.is_full() {
+            while s.positions.front().is_some_and(|p| t.0 - p.t > timeout) || s.positions.is_full() {
                 s.positions.pop_front();
             }
             let span = self.motion.speed_span.0;
-            let reference =
-                s.positions.iter().find(|p| t.0 - p.0 <= span * (1.0 + 1e-6) + 1e-9).or(s.positions.back()).copied();
-            let p = [world.0.x, world.0.y, world.0.z];
-            let _ = s.positions.push_back((t.0, p));
-            let Some((t0, p0)) = reference else { continue };
-            let v = match self.motion.speed_method {
-                SpeedMethod::Regression => regression_speed(&s.positions, t.0, span),
+            let reference = s.positions.iter().find(|p| within(p, t.0, span)).or(s.positions.back()).copied();
+            let now = Sample { t: t.0, p: [point.0.x, point.0.y, point.0.z], range, apparent };
+            let _ = s.positions.push_back(now);
+            let Some(reference) = reference else { continue };
+            let regression = |coords: fn(&Sample) -> [f64; 3]| match self.motion.speed_method {
+                SpeedMethod::Regression => regression_speed(&s.positions, t.0, span, coords),
                 SpeedMethod::Chord => None,
-            }
-            .unwrap_or_else(|| {
-                let dist = ((p[0] - p0[0]).powi(2) + (p[1] - p0[1]).powi(2) + (p[2] - p0[2]).powi(2)).sqrt();
-                (dist / (t.0 - t0), 0.5 * (t.0 + t0))
-            });
-            let (v, t_ref) = v;
+            };
+            let chord_time = 0.5 * (t.0 + reference.t);
+            let estimated_length = || fish_length(&s.lengths, self.swarm_floor);
+            let (v, t_ref) = match self.motion.along_ray {
+                AlongRay::Depth => regression(|p| p.p)
+                    .unwrap_or_else(|| (distance(now.p, reference.p) / (t.0 - reference.t), chord_time)),
+                AlongRay::Heading => {
+                    // Speed across the line of sight (its angular speed times the mean range of the
+                    // span), over the foreshortening averaged over the same span: one pass for the
+                    // mean range and the mean apparent length where known.
+                    let (mut n_in, mut range_sum, mut n_seen, mut seen_sum) = (0usize, 0.0, 0usize, 0.0);
+                    for p in s.positions.iter().filter(|p| p.t >= reference.t) {
+                        n_in += 1;
+                        range_sum += p.range;
+                        if p.apparent.is_finite() && p.apparent > 0.0 {
+                            n_seen += 1;
+                            seen_sum += p.apparent;
+                        }
+                    }
+                    let range = range_sum / n_in as f64;
+                    let (across, t_ref) =
+                        regression(Sample::unit).map(|(w, tm)| (w * range, tm)).unwrap_or_else(|| {
+                            (range * angle_between(now.p, reference.p) / (t.0 - reference.t), chord_time)
+                        });
+                    let depth_chord = regression(|p| p.p)
+                        .map_or_else(|| distance(now.p, reference.p) / (t.0 - reference.t), |(v, _)| v);
+                    let apparent = (n_seen > 0).then(|| Metres(seen_sum / n_seen as f64));
+                    let cos = apparent
+                        .zip(estimated_length())
+                        .and_then(|(a, l)| foreshortening(a, l, self.motion.body_width_ratio));
+                    (cos.map_or(f64::NAN, |c| speed_from_heading(across, c, depth_chord)), t_ref)
+                }
+            };
             if !v.is_finite() || v > self.motion.max_speed.0 {
                 out.skipped += 1;
                 continue;
@@ -343,8 +440,7 @@ impl ActivityEstimator {
             sum += v;
             sum_sq += v * v;
             lag += t.0 - t_ref;
-            let length = self.motion.body_length.or((s.length_n > 0).then(|| Metres(s.length_sum / s.length_n as f64)));
-            if let Some(l) = length {
+            if let Some(l) = self.motion.body_length.or_else(estimated_length) {
                 n_bl += 1;
                 sum_bl += v / l.0;
             }
@@ -392,7 +488,8 @@ mod tests {
     #[test]
     fn speed_of_known_trajectories_with_irregular_timestamps() {
         let cam = camera();
-        let mut est = ActivityEstimator::new(cam, MotionConfig::default(), PostprocessConfig::off());
+        let cfg = MotionConfig { along_ray: AlongRay::Depth, ..Default::default() };
+        let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::off());
         // Fish 1 at 0.5 m/s along world x; fish 2 at 0.3 m/s along world y (depth direction).
         let times = [0.0, 0.033, 0.07, 0.1, 0.15, 0.2, 0.26];
         let mut last = ActivitySample::default();
@@ -417,9 +514,9 @@ mod tests {
         assert!((last.smoothed.unwrap().0 - 0.4).abs() < 1e-9);
         let v: Vec<_> = est.tracks().collect();
         assert_eq!(v.len(), 2);
-        // Estimated length: 40 px / 320 px * depth.
+        // Estimated length: 40 px / 320 px * depth, to the length histogram's resolution.
         let d1 = cam.pose.to_camera(&WorldPoint::new(-1.0 + 0.5 * 0.26, 1.0, 1.2)).depth().0;
-        assert!((v[0].length.unwrap().0 - 40.0 / 320.0 * d1).abs() < 1e-9);
+        assert!((v[0].length.unwrap().0 / (40.0 / 320.0 * d1) - 1.0).abs() < 0.045, "{:?}", v[0].length);
         assert!(last.mean_bls.unwrap() > 0.0);
     }
 
@@ -429,6 +526,7 @@ mod tests {
         let cfg = MotionConfig {
             body_length: Some(Metres(0.5)),
             speed_span: Seconds(0.1),
+            along_ray: AlongRay::Depth,
             track_timeout: Seconds(0.5),
             ..Default::default()
         };
@@ -455,7 +553,12 @@ mod tests {
     fn chord_and_regression_over_a_span_report_their_latency() {
         let cam = camera();
         for method in [SpeedMethod::Chord, SpeedMethod::Regression] {
-            let cfg = MotionConfig { speed_span: Seconds(0.5), speed_method: method, ..Default::default() };
+            let cfg = MotionConfig {
+                speed_span: Seconds(0.5),
+                speed_method: method,
+                along_ray: AlongRay::Depth,
+                ..Default::default()
+            };
             let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::off());
             let mut s = ActivitySample::default();
             for i in 0..40 {
@@ -470,6 +573,75 @@ mod tests {
             let v_mid = 0.2 + 0.6 * (t - 0.25);
             assert!((s.mean.unwrap().0 - v_mid).abs() < 1e-6, "{method:?}: {} vs {v_mid}", s.mean.unwrap().0);
         }
+    }
+
+    /// Fish 0.4 m long (0.04 m wide, 0.08 m high) swimming at 0.5 m/s, first across the image, then
+    /// turned 0-60 degrees out of the image plane; their boxes are drawn as their bodies project, and
+    /// their depth readings scatter by up to 0.1 m from frame to frame. `heading` recovers each fish's
+    /// speed from box motion and foreshortening, the turned fish from their own length, one that
+    /// appears already turned from the swarm's median: within 15 % (the foreshortening model is within
+    /// 0.05 up to 60 degrees, the length histogram within 4.4 %); the depth change is off by half as
+    /// much again in all.
+    #[test]
+    fn heading_recovers_speed_out_of_the_image_plane() {
+        let cam = camera();
+        let (fx, fy) = (cam.intrinsics.fx, cam.intrinsics.fy);
+        let (len, v, dt) = (0.4, 0.5, 1.0 / 30.0);
+        let angles = [0.0f64, 30.0, 45.0, 60.0, 60.0];
+        let run = |along_ray, speed_method| {
+            let cfg = MotionConfig { along_ray, speed_method, ..Default::default() };
+            let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::off());
+            // Turned fish start on the left, where turning away from the camera still shows their length.
+            let mut pos: Vec<[f64; 3]> = [0.0, -0.4, -0.8, -1.5, -1.0]
+                .iter()
+                .enumerate()
+                .map(|(i, &x)| [x, 0.4 + 0.2 * i as f64, 1.5])
+                .collect();
+            for k in 0..90 {
+                let t = k as f64 * dt;
+                let mut obs = Vec::new();
+                for (i, p) in pos.iter_mut().enumerate() {
+                    // Fish 4 is only seen in the last half second, already turned.
+                    if i == 4 && k < 75 {
+                        continue;
+                    }
+                    let a = if t < 1.5 && i < 4 { 0.0 } else { angles[i].to_radians() };
+                    if k > 0 {
+                        p[0] += v * dt * a.cos();
+                        p[1] += v * dt * a.sin();
+                    }
+                    let w = WorldPoint::new(p[0], p[1], p[2]);
+                    let z = cam.pose.to_camera(&w).depth().0;
+                    // Snout and tail as the camera sees them, plus the body's width seen end-on.
+                    let end = |k: f64| {
+                        let e = WorldPoint::new(p[0] + k * len * a.cos(), p[1] + k * len * a.sin(), p[2]);
+                        cam.world_to_pixel(&e).unwrap().u
+                    };
+                    let bbox = PixelBox::from_center(
+                        cam.world_to_pixel(&w).unwrap(),
+                        (end(0.5) - end(-0.5)).abs() + 0.1 * len * a.sin() * fx / z,
+                        0.08 * fy / z,
+                    );
+                    let scatter = 0.1 * (k as f64 * 2.399 + i as f64).sin();
+                    obs.push(TrackObservation { id: i as u32, bbox, depth: Some(Metres(z + scatter)) });
+                }
+                est.update(Seconds(t), &obs);
+            }
+            let mut speeds = [0.0; 5];
+            for tv in est.tracks() {
+                speeds[tv.id as usize] = tv.speed.unwrap().0;
+            }
+            speeds
+        };
+        for method in [SpeedMethod::Chord, SpeedMethod::Regression] {
+            for (i, s) in run(AlongRay::Heading, method).iter().enumerate() {
+                assert!((s / v - 1.0).abs() < 0.15, "heading, {method:?}, fish {i} at {} degrees: {s} m/s", angles[i]);
+            }
+        }
+        let heading = run(AlongRay::Heading, SpeedMethod::Chord);
+        let depth = run(AlongRay::Depth, SpeedMethod::Chord);
+        let err = |s: &[f64; 5]| s.iter().map(|x| (x - v).abs()).sum::<f64>();
+        assert!(err(&depth) > 1.5 * err(&heading), "depth {depth:?}, heading {heading:?}");
     }
 
     #[test]

@@ -6,12 +6,17 @@
 //! fish, a 95% interval of the mean, an EWMA-smoothed value and the mean speed in body lengths/s.
 //!
 //! Per track it runs the post-processing of [`crate::postprocess`], lifts the corrected box centre
-//! with the corrected depth into the world frame through [`crate::geometry::Camera`], and computes
-//! `v = |P_t - P_ref| / (t - t_ref)` from real timestamps. All per-track state is fixed-size and the
-//! track table is allocated once, at construction: steady-state updates never touch the heap.
+//! with the corrected depth into the camera frame through [`crate::geometry::Camera`] (speeds are the
+//! same in the world frame; positions are reported there), and computes the speed over the span from
+//! real timestamps: with [`AlongRay::Depth`] the paper's `v = |P_t - P_ref| / (t - t_ref)`, with
+//! [`AlongRay::Heading`] (the default, [`heading`]) the speed across the image over the box's
+//! foreshortening. All per-track state is fixed-size and the track table is allocated once, at
+//! construction: steady-state updates never touch the heap.
 
 mod estimator;
+pub mod heading;
 mod stats;
 
 pub use estimator::{ActivityEstimator, ActivitySample, MotionConfig, SpeedMethod, TrackObservation, TrackView};
+pub use heading::AlongRay;
 pub use stats::{mean_ci95, student_t975};
