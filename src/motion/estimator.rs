@@ -341,7 +341,10 @@ impl ActivityEstimator {
                 self.swarm_lengths_t = t.0;
             }
         }
-        self.swarm_floor = swarm_floor(&self.swarm_lengths);
+        // Lengths are only needed by the heading method and for an estimated body length: with the
+        // depth chord and a configured length, none of this runs per fish.
+        let wants_lengths = self.motion.along_ray == AlongRay::Heading || self.motion.body_length.is_none();
+        self.swarm_floor = if wants_lengths { swarm_floor(&self.swarm_lengths) } else { None };
         // Forget tracks not seen for too long, so their slots can be reused.
         let timeout = self.motion.track_timeout.0;
         self.tracks.retain(|s| t.0 - s.last_seen <= timeout || !t.0.is_finite());
@@ -381,7 +384,11 @@ impl ActivityEstimator {
                 continue;
             };
             let range = point.range().0;
-            let apparent = apparent_length(&self.camera.intrinsics, &corr.bbox, Metres(range)).0;
+            let apparent = if wants_lengths {
+                apparent_length(&self.camera.intrinsics, &corr.bbox, Metres(range)).0
+            } else {
+                f64::NAN
+            };
             if apparent.is_finite() && apparent > 0.0 {
                 s.lengths.add(Metres(apparent));
                 self.swarm_lengths.add(Metres(apparent));
