@@ -281,6 +281,32 @@ def targets(boxes, gh, gw, min_vis, spread=True, stride=STRIDE):
     return heat, reg, weight
 
 
+# A fish keeps its box in a training window when at least this share of the part the frame shows is
+# inside the window; a fish cut more than that is ignored there (`cut_by_window`, `ignore_mask`).
+MIN_INSIDE_WINDOW = 0.7
+
+
+def cut_by_window(boxes, ox, oy, win_w, win_h, frame_w, frame_h):
+    """Which boxes (x, y, w, h, vis; frame pixels) the window [ox, ox + win_w) x [oy, oy + win_h) cuts:
+    less than MIN_INSIDE_WINDOW of the box's part inside the frame lies inside the window."""
+    def area(x0, y0, x1, y1):
+        w = np.minimum(boxes[:, 0] + boxes[:, 2], x1) - np.maximum(boxes[:, 0], x0)
+        h = np.minimum(boxes[:, 1] + boxes[:, 3], y1) - np.maximum(boxes[:, 1], y0)
+        return np.clip(w, 0, None) * np.clip(h, 0, None)
+    in_frame = area(0, 0, frame_w, frame_h)
+    return area(ox, oy, ox + win_w, oy + win_h) < MIN_INSIDE_WINDOW * np.maximum(in_frame, 1e-9)
+
+
+def ignore_mask(boxes, gh, gw, stride):
+    """[gh, gw] float mask, 1 on the output cells whose centres lie inside any of `boxes` (x, y, w, h)."""
+    m = np.zeros((gh, gw), np.float32)
+    for x, y, w, h in boxes[:, :4]:
+        c0, c1 = max(math.ceil(x / stride - 0.5), 0), min(math.ceil((x + w) / stride - 0.5), gw)
+        r0, r1 = max(math.ceil(y / stride - 0.5), 0), min(math.ceil((y + h) / stride - 0.5), gh)
+        m[r0:r1, c0:c1] = 1.0
+    return m
+
+
 def giou(p, t):
     """Generalised IoU of boxes given as (centre x, centre y, log w, log h) relative to one cell."""
     pw, ph = torch.exp(p[:, 2].clamp(-4.0, 6.0)), torch.exp(p[:, 3].clamp(-4.0, 6.0))
@@ -293,12 +319,15 @@ def giou(p, t):
     return inter / union - (hull - union) / hull
 
 
-def loss_fn(r, heat, reg, weight, giou_weight=1.0):
+def loss_fn(r, heat, reg, weight, giou_weight=1.0, ignore=None):
     """Focal loss on the heat map (CenterNet), L1 on the regression targets and, with giou_weight,
-    a GIoU loss on the decoded boxes (the quantity IoU 0.5 matching scores), both weighted per cell."""
+    a GIoU loss on the decoded boxes (the quantity IoU 0.5 matching scores), both weighted per cell.
+    `ignore` [B, gh, gw] (1 = ignore): cells that are neither positive nor negative."""
     p = torch.sigmoid(r[:, 0]).clamp(1e-4, 1 - 1e-4)
     pos = heat.eq(1.0).float()
     neg = 1.0 - pos
+    if ignore is not None:
+        neg = neg * (1.0 - ignore)
     pl = -(torch.log(p) * (1 - p) ** 2 * pos).sum()
     nl = -(torch.log(1 - p) * p ** 2 * (1 - heat) ** 4 * neg).sum()
     npos = pos.sum().clamp(min=1.0)
@@ -364,16 +393,25 @@ def train_forward(model, x, bf16):
 
 
 def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=print, time_budget_s=None, spread=True,
-          giou_weight=1.0, sub=1):
+          giou_weight=1.0, sub=1, crop=None):
+    """Returns the trained model and the number of epochs run (the time budget may stop it early).
+
+    `crop` (w, h in input pixels, multiples of 32): each training frame is a random window of that
+    size instead of the whole frame (the network is fully convolutional; the export keeps the full
+    input size), so a step costs about the window's share of the pixels. Boxes are shifted into the
+    window; a fish the window cuts (`cut_by_window`) gets no target and no background loss on its
+    cells (`ignore_mask`). Without `crop` nothing changes: the same random draws, the same model."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     model = FishDet(sub=sub).to(memory_format=torch.channels_last)
     bf16 = use_bf16()
-    log(f"det: {'bf16 autocast' if bf16 else 'fp32'}, channels-last, output stride {model.stride}")
+    log(f"det: {'bf16 autocast' if bf16 else 'fp32'}, channels-last, output stride {model.stride}"
+        + (f", random {crop[0]}x{crop[1]} crops" if crop else ""))
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     n = len(images)
     steps = epochs * math.ceil(n / batch)
-    gh, gw = images.shape[1] // model.stride, images.shape[2] // model.stride
+    win_w, win_h = crop if crop else (images.shape[2], images.shape[1])
+    gh, gw = win_h // model.stride, win_w // model.stride
     t0 = time.time()
     step = 0
     frac = lr_at(opt, lr, 0.0, 0.0, time_budget_s)
@@ -387,10 +425,25 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
             idx = perm[i:i + batch]
             # The batch is built in place as NHWC, which is the channels-last layout the model runs
             # in: stacking NCHW copies and converting them had cost ~25 ms of a ~460 ms step.
-            xs = np.empty((len(idx),) + images.shape[1:], np.float32)
-            hs, rs, ms = [], [], []
+            xs = np.empty((len(idx), win_h, win_w, images.shape[3]), np.float32)
+            hs, rs, ms, igs = [], [], [], []
             for k, j in enumerate(idx):
-                b = augment(images[j], boxes[j], rng, xs[k])
+                im, b = images[j], boxes[j]
+                if crop:
+                    # Offsets on the head's stride-4 grid; `targets` clips the kept boxes to the window.
+                    ox = STRIDE * int(rng.integers(0, (im.shape[1] - win_w) // STRIDE + 1))
+                    oy = STRIDE * int(rng.integers(0, (im.shape[0] - win_h) // STRIDE + 1))
+                    cut = cut_by_window(b, ox, oy, win_w, win_h, im.shape[1], im.shape[0])
+                    im = im[oy:oy + win_h, ox:ox + win_w]
+                    b = b.copy()
+                    b[:, 0] -= ox
+                    b[:, 1] -= oy
+                b = augment(im, b, rng, xs[k])
+                if crop:
+                    # A fish the window cuts (not the frame) is neither a fish nor background: as a
+                    # positive it taught the detector to box halves of whole fish.
+                    igs.append(ignore_mask(b[cut], gh, gw, model.stride))
+                    b = b[~cut]
                 h, r, m = targets(b, gh, gw, min_vis, spread, model.stride)
                 hs.append(h)
                 rs.append(r)
@@ -398,7 +451,8 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
             xs /= 255.0
             out = train_forward(model, torch.from_numpy(xs).permute(0, 3, 1, 2), bf16)
             loss = loss_fn(out, torch.from_numpy(np.stack(hs)), torch.from_numpy(np.stack(rs)),
-                           torch.from_numpy(np.stack(ms)), giou_weight)
+                           torch.from_numpy(np.stack(ms)), giou_weight,
+                           torch.from_numpy(np.stack(igs)) if crop else None)
             opt.zero_grad()
             loss.backward()
             opt.step()

@@ -29,13 +29,13 @@ import quant
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def parse_crop(text, net_w, net_h):
-    """'WxH' -> (w, h), checked against the network input; '' -> None."""
+def parse_crop(text, net_w, net_h, flag="--depth-crop"):
+    """'WxH' -> (w, h), checked against the network input; '' -> None. `flag` names the option in errors."""
     if not text:
         return None
-    w, h = data.parse_size(text, "--depth-crop")
+    w, h = data.parse_size(text, flag)
     if w % 32 or h % 32 or w > net_w or h > net_h:
-        raise SystemExit(f"--depth-crop {text!r}: width and height must be multiples of 32 within the "
+        raise SystemExit(f"{flag} {text!r}: width and height must be multiples of 32 within the "
                          f"{net_w}x{net_h} input")
     return w, h
 
@@ -58,6 +58,8 @@ def main():
                     help="WxH: train the depth network on random windows of that size (multiples of 32)")
     ap.add_argument("--depth-crop-until", type=float, default=1.0,
                     help="with --depth-crop: fraction of the run after which whole frames are used")
+    ap.add_argument("--det-crop", default="",
+                    help="WxH (multiples of 32): train the detector on random windows of that size (default: whole frames)")
     ap.add_argument("--det-sub", type=int, default=2,
                     help="detector sub-cells per stride-4 cell and axis (2: heat map and boxes at stride 2)")
     ap.add_argument("--metrics", default=os.path.join(HERE, "metrics.json"))
@@ -71,6 +73,7 @@ def main():
     args = ap.parse_args()
     args.requantize = args.requantize or args.reexport
     depth_crop = parse_crop(args.depth_crop, data.NET_W, data.NET_H)  # before the data loads
+    det_crop = parse_crop(args.det_crop, data.NET_W, data.NET_H, "--det-crop")
     if not 0.0 < args.depth_crop_until <= 1.0:
         raise SystemExit(f"--depth-crop-until {args.depth_crop_until}: expected a fraction in (0, 1]")
     torch.set_num_threads(args.threads)
@@ -113,7 +116,7 @@ def main():
         else:
             t1 = time.time()
             model, epochs_run = det.train(tr_images, tr_boxes, args.det_epochs, log=log,
-                                          time_budget_s=args.budget_s, sub=args.det_sub)
+                                          time_budget_s=args.budget_s, sub=args.det_sub, crop=det_crop)
             train_s = time.time() - t1
             det.export(model, fp32, data.NET_H, data.NET_W)
             res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs, "epochs_run": epochs_run,
@@ -122,6 +125,8 @@ def main():
                    "output_stride": model.stride,
                    "data": data_info,
                    "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
+            if det_crop:
+                res["train_crop"] = list(det_crop)
         calib = [tr_images[i].astype(np.float32).transpose(2, 0, 1) / 255.0 for i in calib_idx]
         res["float_stem"] = True
         paths, ms = quantize_and_time(args.models, "fish_det", fp32, calib, "images", res, float_stem=True)
