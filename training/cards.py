@@ -57,6 +57,24 @@ def upsample_note(d):
             "which ONNX Runtime runs slowly there).")
 
 
+def arch_note(d):
+    """The card's sentence for a detector layout other than the full one (det.ARCHS)."""
+    if d.get("arch", "full") == "full":
+        return ""
+    if d["arch"] == "slim":
+        return ("\nSlim layout (`--det-arch slim`): one residual block at stride 8 instead of two, and the FPN's\n"
+                "stride-4 output feeds the head's 1x1 convolution directly (no 3x3 convolution between).")
+    return f"\nLayout: {d['arch']}."
+
+
+def crop_note(d):
+    """Ends the training sentence: the windows the detector trained on, when not whole frames."""
+    if not d.get("train_crop"):
+        return ""
+    w, h = d["train_crop"]
+    return f", on random {w}x{h} windows of the frames (a fish the window cuts is neither target nor background)"
+
+
 def det_card(m):
     d = m["detector"]
     data = d["data"]
@@ -90,7 +108,7 @@ the faster int8 variant on this machine).{quant_note(d)}
 Plain 3x3-conv ReLU backbone (strides 2 to 32, residual blocks), top-down FPN to one stride-4
 CenterNet-style head (centre heatmap with focal loss; sub-cell offset and log size with L1 and GIoU
 on every cell where a fish's heat-map Gaussian is >= 0.4, as TTFNet), box decode and peak extraction
-inside the graph.{sub_note(st)} {d.get('params_m', 1.10)} M parameters. Code: `training/det.py`.
+inside the graph.{sub_note(st)}{arch_note(d)} {d.get('params_m', 1.10)} M parameters. Code: `training/det.py`.
 
 ## Data
 Rendered with `fme synth --preset swarm` (20 to 60 fish, water types I, II, III, 1C, 3C, 5C, 7C,
@@ -101,7 +119,7 @@ layouts A to F, 640x384): training seeds {data.get('train_seeds')} ({data['train
 ## Training
 `bash training/train.sh` (or `make -C training all`): CPU, torch {m.get('torch', '2.15.0')}, AdamW, one-cycle LR,
 batch 16, {d['epochs']} epochs requested{stopped}, fixed seeds. Training time on the 2-core machine that trained it (shared):
-{d['train_seconds']:.0f} s{autocast_note(d)}.
+{d['train_seconds']:.0f} s{autocast_note(d)}{crop_note(d)}.
 
 ## Quality on the held-out sequences
 Precision / recall at IoU 0.5 against the ground-truth boxes clipped to the frame; boxes with

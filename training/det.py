@@ -38,14 +38,16 @@ class Block(nn.Module):
 
 class FishDet(nn.Module):
     # sub=1 is the original stride-4 head; train.py (and so train.sh) defaults to sub=2.
-    def __init__(self, w=(16, 32, 64, 96, 128), fpn=64, head=32, sub=1):
+    # s8_blocks and head_conv size the two most expensive parts of the int8 graph (ORT profile, 2 threads:
+    # each stride-8 3x3 convolution ~0.30 ms, each stride-4 one ~0.35 ms); see README "A slimmer detector".
+    def __init__(self, w=(16, 32, 64, 96, 128), fpn=64, head=32, sub=1, s8_blocks=2, head_conv=True):
         super().__init__()
         assert STRIDE % sub == 0, f"sub must divide {STRIDE}, got {sub}"
         self.sub = sub
         self.stride = STRIDE // sub
         self.stem = conv(3, w[0], 2)
         self.s4 = nn.Sequential(conv(w[0], w[1], 2), Block(w[1]))
-        self.s8 = nn.Sequential(conv(w[1], w[2], 2), Block(w[2]), Block(w[2]))
+        self.s8 = nn.Sequential(conv(w[1], w[2], 2), *[Block(w[2]) for _ in range(s8_blocks)])
         self.s16 = nn.Sequential(conv(w[2], w[3], 2), Block(w[3]), Block(w[3]))
         self.s32 = nn.Sequential(conv(w[3], w[4], 2), Block(w[4]))
         self.l32 = conv(w[4], fpn, k=1)
@@ -56,7 +58,7 @@ class FishDet(nn.Module):
         self.m8 = conv(fpn, fpn)
         self.r4 = conv(fpn, head, k=1)
         self.m4 = conv(head, head)
-        self.h = conv(head, head)
+        self.h = conv(head, head) if head_conv else nn.Identity()
         self.out = nn.Conv2d(head, 5 * sub * sub, 1)
         # pixel_shuffle takes output channel c from input channels c*sub^2 .. (c+1)*sub^2 - 1.
         nn.init.constant_(self.out.bias[0:sub * sub], -4.6)  # score prior 0.01
@@ -87,6 +89,20 @@ class FishDet(nn.Module):
         if not self.export_decode:
             return self.raw(x)
         return decode_nhwc(self.features(x), self.out.weight, self.out.bias, self.sub)
+
+
+# Named layouts (train.py --det-arch): "full" is the bundled one; "slim" drops one stride-8 residual
+# block and the stride-4 head convolution (int8 -19% with random weights; README "A slimmer detector").
+ARCHS = {"full": {}, "slim": {"s8_blocks": 1, "head_conv": False}}
+
+
+def arch_of(model):
+    """The ARCHS name of a FishDet's layout."""
+    kw = {"s8_blocks": len(model.s8) - 1, "head_conv": not isinstance(model.h, nn.Identity)}
+    for name, a in ARCHS.items():
+        if all(kw[k] == a.get(k, v) for k, v in (("s8_blocks", 2), ("head_conv", True))):
+            return name
+    return f"s8_blocks={kw['s8_blocks']},head_conv={kw['head_conv']}"
 
 
 def decode(o, sub):
@@ -183,7 +199,10 @@ def from_onnx(path, sub=2):
 
     m = onnx.load(path)
     init = {i.name: numpy_helper.to_array(i) for i in m.graph.initializer}
-    model = FishDet(sub=sub)
+    # The layout from the node scopes: "/s8/s8.2/..." is the second stride-8 block, "/h/..." the head conv.
+    scopes = [n.name.strip("/").split("/") for n in m.graph.node if n.op_type == "Conv"]
+    s8 = {int(p[1].split(".")[1]) for p in scopes if len(p) > 2 and p[0] == "s8" and p[1].startswith("s8.")}
+    model = FishDet(sub=sub, s8_blocks=max(s8, default=0), head_conv=any(p[0] == "h" for p in scopes))
     mods = dict(model.named_modules())
     done = set()
 
@@ -393,7 +412,7 @@ def train_forward(model, x, bf16):
 
 
 def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=print, time_budget_s=None, spread=True,
-          giou_weight=1.0, sub=1, crop=None):
+          giou_weight=1.0, sub=1, crop=None, arch="full"):
     """Returns the trained model and the number of epochs run (the time budget may stop it early).
 
     `crop` (w, h in input pixels, multiples of 32): each training frame is a random window of that
@@ -403,9 +422,9 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
     cells (`ignore_mask`). Without `crop` nothing changes: the same random draws, the same model."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    model = FishDet(sub=sub).to(memory_format=torch.channels_last)
+    model = FishDet(sub=sub, **ARCHS[arch]).to(memory_format=torch.channels_last)
     bf16 = use_bf16()
-    log(f"det: {'bf16 autocast' if bf16 else 'fp32'}, channels-last, output stride {model.stride}"
+    log(f"det: {arch}, {'bf16 autocast' if bf16 else 'fp32'}, channels-last, output stride {model.stride}"
         + (f", random {crop[0]}x{crop[1]} crops" if crop else ""))
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     n = len(images)

@@ -60,6 +60,8 @@ def main():
                     help="with --depth-crop: fraction of the run after which whole frames are used")
     ap.add_argument("--det-crop", default="",
                     help="WxH (multiples of 32): train the detector on random windows of that size (default: whole frames)")
+    ap.add_argument("--det-arch", default="full", choices=sorted(det.ARCHS),
+                    help="detector layout (det.ARCHS): full, or slim (one stride-8 block less, no stride-4 head conv)")
     ap.add_argument("--det-sub", type=int, default=2,
                     help="detector sub-cells per stride-4 cell and axis (2: heat map and boxes at stride 2)")
     ap.add_argument("--metrics", default=os.path.join(HERE, "metrics.json"))
@@ -116,13 +118,15 @@ def main():
         else:
             t1 = time.time()
             model, epochs_run = det.train(tr_images, tr_boxes, args.det_epochs, log=log,
-                                          time_budget_s=args.budget_s, sub=args.det_sub, crop=det_crop)
+                                          time_budget_s=args.budget_s, sub=args.det_sub, crop=det_crop,
+                                          arch=args.det_arch)
             train_s = time.time() - t1
             det.export(model, fp32, data.NET_H, data.NET_W)
             res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs, "epochs_run": epochs_run,
                    "autocast": "bf16" if det.use_bf16() else "fp32",
                    "input": [data.NET_W, data.NET_H],
                    "output_stride": model.stride,
+                   "arch": det.arch_of(model),
                    "data": data_info,
                    "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
             if det_crop:

@@ -12,6 +12,7 @@
 # /tmp/fme-train-data), DET_EPOCHS, DEPTH_EPOCHS, BUDGET_S and DEPTH_BUDGET_S (seconds of training: detector, depth),
 # DET_SUB (detector output sub-cells, default 2), DEPTH_FOCUS (weight of the depth loss's focus term on fish and cubes), DET_NET, DEPTH_NET (WxH),
 # DET_CROP (WxH: the detector trains on random windows of that size, fish the window cuts ignored; default: whole frames),
+# DET_ARCH (detector layout, det.ARCHS: full or slim),
 # DEPTH_CROP (WxH: the depth network trains on random windows of that size; default: whole frames) and
 # DEPTH_CROP_UNTIL (fraction of the depth run after which it goes on with whole frames, default 1),
 # TRAIN_SEQS (sequences rendered, default 864), DET_SEQS and DEPTH_SEQS (the first N of them each model
@@ -42,6 +43,7 @@ DEPTH_CROP=${DEPTH_CROP:-}
 DEPTH_CROP_UNTIL=${DEPTH_CROP_UNTIL:-1}
 # Detector windows: see README "Detector on crops" (a 384x256 window ran a step 1.3-1.7x faster here; not bundled).
 DET_CROP=${DET_CROP:-}
+DET_ARCH=${DET_ARCH:-full}
 DET_NET=${DET_NET:-480x288}
 DEPTH_NET=${DEPTH_NET:-480x288}
 # The step count ends the detector's run; its budget only bounds a slower machine.
@@ -92,7 +94,7 @@ cd "$HERE"
 if [ "${SKIP:-}" != det ]; then
   FME_NET=$DET_NET nice -n "$NICE" "$VENV/bin/python" train.py --data "$DATA" --models "$ROOT/models" --skip depth \
     --train-seqs "$DET_SEQS" --det-epochs "$DET_EPOCHS" --det-sub "$DET_SUB" --budget-s "$BUDGET_S" \
-    --det-crop "$DET_CROP" ${TRAIN_ARGS:-}
+    --det-crop "$DET_CROP" --det-arch "$DET_ARCH" ${TRAIN_ARGS:-}
 fi
 if [ "${SKIP:-}" != depth ]; then
   FME_NET=$DEPTH_NET nice -n "$NICE" "$VENV/bin/python" train.py --data "$DATA" --models "$ROOT/models" --skip det \
