@@ -64,6 +64,9 @@ def arch_note(d):
     if d["arch"] == "slim":
         return ("\nSlim layout (`--det-arch slim`): one residual block at stride 8 instead of two, and the FPN's\n"
                 "stride-4 output feeds the head's 1x1 convolution directly (no 3x3 convolution between).")
+    if d["arch"] == "no_head_conv":
+        return ("\nLayout `--det-arch no_head_conv`: the FPN's stride-4 output feeds the head's 1x1 convolution\n"
+                "directly (no 3x3 convolution between).")
     return f"\nLayout: {d['arch']}."
 
 

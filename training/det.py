@@ -92,8 +92,9 @@ class FishDet(nn.Module):
 
 
 # Named layouts (train.py --det-arch): "full" is the bundled one; "slim" drops one stride-8 residual
-# block and the stride-4 head convolution (int8 -19% with random weights; README "A slimmer detector").
-ARCHS = {"full": {}, "slim": {"s8_blocks": 1, "head_conv": False}}
+# block and the stride-4 head convolution (int8 -19% with random weights; README "A slimmer detector"),
+# "no_head_conv" only the latter (-9%).
+ARCHS = {"full": {}, "slim": {"s8_blocks": 1, "head_conv": False}, "no_head_conv": {"head_conv": False}}
 
 
 def arch_of(model):

@@ -61,7 +61,8 @@ def main():
     ap.add_argument("--det-crop", default="",
                     help="WxH (multiples of 32): train the detector on random windows of that size (default: whole frames)")
     ap.add_argument("--det-arch", default="full", choices=sorted(det.ARCHS),
-                    help="detector layout (det.ARCHS): full, or slim (one stride-8 block less, no stride-4 head conv)")
+                    help="detector layout (det.ARCHS): full; slim (one stride-8 block less, no stride-4 head conv); "
+                         "no_head_conv (only the latter)")
     ap.add_argument("--det-sub", type=int, default=2,
                     help="detector sub-cells per stride-4 cell and axis (2: heat map and boxes at stride 2)")
     ap.add_argument("--metrics", default=os.path.join(HERE, "metrics.json"))

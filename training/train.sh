@@ -12,7 +12,7 @@
 # /tmp/fme-train-data), DET_EPOCHS, DEPTH_EPOCHS, BUDGET_S and DEPTH_BUDGET_S (seconds of training: detector, depth),
 # DET_SUB (detector output sub-cells, default 2), DEPTH_FOCUS (weight of the depth loss's focus term on fish and cubes), DET_NET, DEPTH_NET (WxH),
 # DET_CROP (WxH: the detector trains on random windows of that size, fish the window cuts ignored; default: whole frames),
-# DET_ARCH (detector layout, det.ARCHS: full or slim),
+# DET_ARCH (detector layout, det.ARCHS: full, slim or no_head_conv),
 # DEPTH_CROP (WxH: the depth network trains on random windows of that size; default: whole frames) and
 # DEPTH_CROP_UNTIL (fraction of the depth run after which it goes on with whole frames, default 1),
 # TRAIN_SEQS (sequences rendered, default 864), DET_SEQS and DEPTH_SEQS (the first N of them each model
