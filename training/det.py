@@ -97,15 +97,6 @@ class FishDet(nn.Module):
 ARCHS = {"full": {}, "slim": {"s8_blocks": 1, "head_conv": False}, "no_head_conv": {"head_conv": False}}
 
 
-def arch_of(model):
-    """The ARCHS name of a FishDet's layout."""
-    kw = {"s8_blocks": len(model.s8) - 1, "head_conv": not isinstance(model.h, nn.Identity)}
-    for name, a in ARCHS.items():
-        if all(kw[k] == a.get(k, v) for k, v in (("s8_blocks", 2), ("head_conv", True))):
-            return name
-    return f"s8_blocks={kw['s8_blocks']},head_conv={kw['head_conv']}"
-
-
 def decode(o, sub):
     """The box decode and peak extraction, from the head's output [B, 5*sub^2, gh, gw] (stride-4
     cells; channel c*sub^2 + a*sub + b is channel c of sub-cell row a, column b, as pixel_shuffle

@@ -127,7 +127,7 @@ def main():
                    "autocast": "bf16" if det.use_bf16() else "fp32",
                    "input": [data.NET_W, data.NET_H],
                    "output_stride": model.stride,
-                   "arch": det.arch_of(model),
+                   "arch": args.det_arch,
                    "data": data_info,
                    "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
             if det_crop:
