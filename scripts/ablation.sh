@@ -18,9 +18,15 @@ SYNTH_FME=${SYNTH_FME:-$FME}   # a binary with `fme synth` (branch synth until m
 mkdir -p "$OUT"
 synth() { local out=$1; shift; [ -f "$out/seqinfo.ini" ] || [ -d "$out" -a "$2" = postproc-suite ] || "$SYNTH_FME" synth --out "$out" --force "$@" >/dev/null; }
 # The README's tables were measured before the heading method (motion.along_ray = "heading", README
-# "Speed from the heading"); ALONG_RAY=heading runs today's default instead.
+# "Speed from the heading") and before fish entered the mean at an age (motion.min_age, README "Young
+# tracks out of the mean"); ALONG_RAY=heading MIN_AGE=1 runs today's defaults instead.
 ALONG_RAY=${ALONG_RAY:-depth}
-ev() { "$FME" eval --json --along-ray "$ALONG_RAY" "$@"; }
+MIN_AGE=${MIN_AGE:-0}
+ev() { # --paper keeps its own min_age 0
+  local a=(--along-ray "$ALONG_RAY")
+  [[ " $* " == *" --paper "* ]] || a+=(--min-age "$MIN_AGE")
+  "$FME" eval --json "${a[@]}" "$@"
+}
 # The paper's settings (frame-to-frame speed, eq. 3 and eq. 4 on) and fme's measured choice.
 TUNED=()   # the defaults: 1 s chord speed, eq. 4 on, eq. 3 off
 

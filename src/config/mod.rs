@@ -145,6 +145,9 @@ impl Config {
         if !(m.speed_span_s.is_finite() && m.speed_span_s >= 0.0) {
             return err("motion.speed_span_s", format!("must be >= 0 s, got {}", m.speed_span_s));
         }
+        if !(m.min_age_s.is_finite() && m.min_age_s >= 0.0) {
+            return err("motion.min_age_s", format!("must be >= 0 s (0 = off), got {}", m.min_age_s));
+        }
         if !(m.body_width_ratio.is_finite() && (0.0..=0.5).contains(&m.body_width_ratio)) {
             return err("motion.body_width_ratio", format!("must be within 0..=0.5, got {}", m.body_width_ratio));
         }

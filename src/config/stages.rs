@@ -178,6 +178,8 @@ pub struct MotionConfig {
     pub smoothing_s: f64,
     /// Each fish's speed is its displacement over this span, s (0 = frame to frame, as the paper).
     pub speed_span_s: f64,
+    /// A fish enters the mean once it has been tracked this long, s (0 = at once, as the paper).
+    pub min_age_s: f64,
     /// Where each fish's speed along the line of sight comes from: `heading` (its speed across the
     /// image over the box's foreshortening: fish swim head first) or `depth` (its change of depth, the paper).
     pub along_ray: crate::motion::AlongRay,
@@ -195,6 +197,7 @@ impl Default for MotionConfig {
             min_fish: 3,
             smoothing_s: 60.0,
             speed_span_s: d.speed_span.0,
+            min_age_s: d.min_age.0,
             along_ray: d.along_ray,
             body_width_ratio: d.body_width_ratio,
             max_speed_mps: d.max_speed.0,

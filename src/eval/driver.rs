@@ -573,7 +573,9 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
         mean_true_mps: truth.iter().sum::<f64>() / n,
         mean_est_mps: est_v.iter().sum::<f64>() / n,
         mean_fish: scored.iter().map(|r| r.n_fish as f64).sum::<f64>() / n,
-        latency_s: latencies.iter().map(|l| l.0).sum::<f64>() / latencies.len().max(1) as f64,
+        // Over the frames with an estimate (a frame without one has no latency).
+        latency_s: series.iter().zip(&latencies).filter(|(r, _)| r.est_mps.is_some()).map(|(_, l)| l.0).sum::<f64>()
+            / series.iter().filter(|r| r.est_mps.is_some()).count().max(1) as f64,
         depth_rmse_m: depth_acc.rmse(),
         depth_delta_1_25: depth_acc.delta_1_25(),
         depth_delta_1_25_2: depth_acc.delta_1_25_2(),

@@ -100,6 +100,10 @@ pub struct MotionConfig {
     /// one): 0 = frame to frame, as the paper; default 1 s. Longer spans trade latency for less noise
     /// (at most 32 positions are kept, so spans beyond 32 frames use the oldest of those).
     pub speed_span: Seconds,
+    /// A fish enters the mean only once it has been tracked this long: a young track's speed is a
+    /// chord over a few frames, which turns position noise into speed, and `|v|` turns that noise
+    /// into an upward bias. 0 = every fish with two positions, as the paper.
+    pub min_age: Seconds,
     /// Chord (the paper) or least-squares regression over the span.
     pub speed_method: SpeedMethod,
     /// Where the speed along the line of sight comes from: the change of depth (the paper) or the
@@ -125,6 +129,7 @@ impl Default for MotionConfig {
             // from 0.23 to 0.016 m/s against the paper's frame-to-frame speed; the estimate then
             // refers to t - 0.5 s (`ActivitySample::latency`).
             speed_span: Seconds(1.0),
+            min_age: Seconds(1.0),
             speed_method: SpeedMethod::Chord,
             along_ray: AlongRay::Heading,
             body_width_ratio: 0.1,
@@ -146,6 +151,9 @@ impl MotionConfig {
         }
         if !(self.speed_span.0.is_finite() && self.speed_span.0 >= 0.0) {
             return Err("motion.speed_span must be zero or a positive number of seconds");
+        }
+        if !(self.min_age.0.is_finite() && self.min_age.0 >= 0.0) {
+            return Err("motion.min_age must be zero or a positive number of seconds");
         }
         if !(self.body_width_ratio.is_finite() && (0.0..=0.5).contains(&self.body_width_ratio)) {
             return Err("motion.body_width_ratio must be within 0..=0.5");
@@ -227,6 +235,8 @@ pub struct TrackView {
 #[derive(Debug, Clone)]
 struct TrackState {
     id: u32,
+    /// Time of its first observation (NaN before it).
+    first_seen: f64,
     last_seen: f64,
     filter: TrackFilter,
     positions: Deque<Sample, POSITIONS>,
@@ -241,6 +251,7 @@ impl TrackState {
     fn new(id: u32) -> Self {
         Self {
             id,
+            first_seen: f64::NAN,
             last_seen: f64::NEG_INFINITY,
             filter: TrackFilter::new(),
             positions: Deque::new(),
@@ -370,6 +381,9 @@ impl ActivityEstimator {
                 continue;
             }
             s.last_seen = t.0;
+            if s.first_seen.is_nan() {
+                s.first_seen = t.0;
+            }
             let corr = s.filter.correct_box(&self.post, t, obs.bbox);
             out.boxes_corrected += (corr.width_corrected || corr.height_corrected) as u32;
             s.bbox = corr.bbox;
@@ -443,6 +457,9 @@ impl ActivityEstimator {
                 continue;
             }
             s.speed = Some(v);
+            if t.0 - s.first_seen < self.motion.min_age.0 * (1.0 - 1e-6) {
+                continue;
+            }
             n += 1;
             sum += v;
             sum_sq += v * v;
@@ -495,7 +512,8 @@ mod tests {
     #[test]
     fn speed_of_known_trajectories_with_irregular_timestamps() {
         let cam = camera();
-        let cfg = MotionConfig { along_ray: AlongRay::Depth, ..Default::default() };
+        // Every fish in the mean from its second position (`min_age` 0, as the paper).
+        let cfg = MotionConfig { along_ray: AlongRay::Depth, min_age: Seconds(0.0), ..Default::default() };
         let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::off());
         // Fish 1 at 0.5 m/s along world x; fish 2 at 0.3 m/s along world y (depth direction).
         let times = [0.0, 0.033, 0.07, 0.1, 0.15, 0.2, 0.26];
@@ -533,6 +551,7 @@ mod tests {
         let cfg = MotionConfig {
             body_length: Some(Metres(0.5)),
             speed_span: Seconds(0.1),
+            min_age: Seconds(0.0),
             along_ray: AlongRay::Depth,
             track_timeout: Seconds(0.5),
             ..Default::default()
@@ -580,6 +599,38 @@ mod tests {
             let v_mid = 0.2 + 0.6 * (t - 0.25);
             assert!((s.mean.unwrap().0 - v_mid).abs() < 1e-6, "{method:?}: {} vs {v_mid}", s.mean.unwrap().0);
         }
+    }
+
+    #[test]
+    fn a_fish_enters_the_mean_once_it_is_old_enough() {
+        let cam = camera();
+        let cfg = MotionConfig { min_age: Seconds(0.5), along_ray: AlongRay::Depth, ..Default::default() };
+        let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::off());
+        // Fish 1 from t = 0 at 0.3 m/s; fish 2 appears at t = 1 s at 0.6 m/s.
+        for i in 0..60 {
+            let t = i as f64 / 30.0;
+            let mut obs = vec![observe(&cam, 1, WorldPoint::new(0.3 * t, 1.0, 1.5))];
+            if t >= 1.0 - 1e-9 {
+                obs.push(observe(&cam, 2, WorldPoint::new(-0.5 + 0.6 * (t - 1.0), 1.2, 1.4)));
+            }
+            let s = est.update(Seconds(t), &obs);
+            // At frame i fish 1 is i / 30 s old (15 frames = 0.5 s), fish 2 (i - 30) / 30 s.
+            let expected = usize::from(i >= 15) + usize::from(i >= 45);
+            assert_eq!(s.n_fish, expected, "frame {i}: {s:?}");
+            if i < 15 {
+                assert!(s.mean.is_none());
+            } else if i < 45 {
+                assert!((s.mean.unwrap().0 - 0.3).abs() < 1e-9, "frame {i}: {s:?}");
+            } else {
+                assert!((s.mean.unwrap().0 - 0.45).abs() < 1e-9, "frame {i}: {s:?}");
+            }
+            // A young fish still has its own speed for diagnostics.
+            if (31..45).contains(&i) {
+                let young = est.tracks().find(|v| v.id == 2).unwrap();
+                assert!((young.speed.unwrap().0 - 0.6).abs() < 1e-9);
+            }
+        }
+        assert!(MotionConfig { min_age: Seconds(f64::NAN), ..Default::default() }.validate().is_err());
     }
 
     /// Fish 0.4 m long (0.04 m wide, 0.08 m high) swimming at 0.5 m/s, first across the image, then
@@ -654,8 +705,8 @@ mod tests {
     #[test]
     fn bad_observations_are_skipped_not_propagated() {
         let cam = camera();
-        let mut est =
-            ActivityEstimator::new(cam, MotionConfig { max_tracks: 1, ..Default::default() }, PostprocessConfig::off());
+        let cfg = MotionConfig { max_tracks: 1, min_age: Seconds(0.0), ..Default::default() };
+        let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::off());
         let good = observe(&cam, 1, WorldPoint::new(0.0, 1.0, 1.5));
         let nan_box =
             TrackObservation { id: 2, bbox: PixelBox::new(f64::NAN, 0.0, 1.0, 1.0), depth: Some(Metres(1.0)) };

@@ -218,6 +218,7 @@ fn motion_config(cfg: &Config) -> crate::motion::MotionConfig {
         max_tracks: track::MAX_TRACKS,
         body_length: (m.body_length_m > 0.0).then_some(Metres(m.body_length_m)),
         speed_span: Seconds(m.speed_span_s),
+        min_age: Seconds(m.min_age_s),
         along_ray: m.along_ray,
         body_width_ratio: m.body_width_ratio,
         smoothing: Seconds(m.smoothing_s),
