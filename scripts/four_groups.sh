@@ -4,7 +4,8 @@
 #   A  GT boxes + GT depth          B  GT boxes + estimated depth (depth network + robust fit, layout F)
 #   C  predicted boxes + GT depth   D  predicted boxes + estimated depth (detector + tracker + depth network)
 # on single-fish and swarm sequences (30 s each). Prints a table; JSON per run in OUT/results-SEED_BASE.
-# Usage: scripts/four_groups.sh [OUT_DIR]   (default target/four-groups). FME overrides the binary.
+# Usage: scripts/four_groups.sh [OUT_DIR]   (default target/four-groups). FME overrides the binary;
+# EVAL_ARGS adds `fme eval` options to every run (e.g. EVAL_ARGS="--min-age 0": every fish at once).
 # SEED_BASE (default 7021) picks the set: seeds B, B+1 (single fish), B+10..B+12 (swarms); 7041 is a
 # second set, used for two choices only (leaving hidden fish out in `depth.sample = "visible"`, and with 7021 the
 # threshold for a fish seen behind another; 7021's was used to choose the depth loss's focus weight and the
@@ -32,7 +33,8 @@ for seq in "single-s$B" "single-s$((B + 1))" "swarm20-s$((B + 10))" "swarm40-s$(
       C) args=(--boxes model --depth gt) ;;
       D) args=(--boxes model --depth model --fit robust) ;;
     esac
-    "$FME" eval --json --sequence "$OUT/$seq" "${args[@]}" --plot "$OUT/$seq-$g.png" 2>/dev/null > "$OUT/results-$B/$seq-$g.json"
+    # shellcheck disable=SC2086 # EVAL_ARGS is a list of options
+    "$FME" eval --json --sequence "$OUT/$seq" "${args[@]}" ${EVAL_ARGS:-} --plot "$OUT/$seq-$g.png" 2>/dev/null > "$OUT/results-$B/$seq-$g.json"
   done
 done
 python3 - "$OUT/results-$B" <<'PY'

@@ -45,7 +45,8 @@ DEPTH_CROP_UNTIL=${DEPTH_CROP_UNTIL:-1}
 DET_CROP=${DET_CROP:-}
 # Detector layout: slim (one stride-8 block and the stride-4 head convolution less) ran 14-16% faster in fme
 # but lost held-out precision (and recall on whole frames); no_head_conv on 384x256 windows kept both but
-# tracked the recorded swarm worse, so full stays (README "A slimmer detector").
+# tracks worse (its scores are less peaked) and, with young tracks out of the mean, measures speed no
+# better, so full stays (README "A slimmer detector").
 DET_ARCH=${DET_ARCH:-full}
 DET_NET=${DET_NET:-480x288}
 DEPTH_NET=${DEPTH_NET:-480x288}

@@ -48,7 +48,7 @@ pub struct EvalArgs {
     #[arg(long)]
     pub speed_span: Option<f64>,
     /// A fish enters the swarm mean once it has been tracked this many seconds (0 = at once, as the
-    /// paper; default 0.5, `--paper` 0).
+    /// paper; default 1, `--paper` 0).
     #[arg(long)]
     pub min_age: Option<f64>,
     /// The paper's settings: frame-to-frame speed from the depth change, every fish at once, eq. 3 and eq. 4
