@@ -101,8 +101,9 @@ pub struct MotionConfig {
     /// (at most 32 positions are kept, so spans beyond 32 frames use the oldest of those).
     pub speed_span: Seconds,
     /// A fish enters the mean only once it has been tracked this long: a young track's speed is a
-    /// chord over a few frames, which turns position noise into speed, and `|v|` turns that noise
-    /// into an upward bias. 0 = every fish with two positions, as the paper.
+    /// chord over its first few frames, noisy and biased (measured too high with the depth chord,
+    /// where `|v|` rectifies the noise, and too low with the heading method; README "Young tracks out
+    /// of the mean"). 0 = every fish with two positions, as the paper.
     pub min_age: Seconds,
     /// Chord (the paper) or least-squares regression over the span.
     pub speed_method: SpeedMethod,
