@@ -130,8 +130,8 @@ impl Default for MotionConfig {
             // from 0.23 to 0.016 m/s against the paper's frame-to-frame speed; the estimate then
             // refers to t - 0.5 s (`ActivitySample::latency`).
             speed_span: Seconds(1.0),
-            // A full span before a fish counts: group D on 12 held-out swarms 0.0228 -> 0.0196 m/s
-            // (README "Young tracks out of the mean").
+            // A full span before a fish counts: group D on 12 held-out swarms 0.0228 -> 0.0196 m/s,
+            // 0.0192 -> 0.0182 on the frames from 2 s on (README "Young tracks out of the mean").
             min_age: Seconds(1.0),
             speed_method: SpeedMethod::Chord,
             along_ray: AlongRay::Heading,
