@@ -57,17 +57,19 @@ def upsample_note(d):
             "which ONNX Runtime runs slowly there).")
 
 
+# What each det.ARCHS layout leaves out of the full one (kept here: cards.py does not import torch).
+_ONE_S8_BLOCK = "one residual block at stride 8 instead of two"
+_NO_HEAD_CONV = "no 3x3 convolution between the FPN's stride-4 output and the head's 1x1 convolution"
+ARCH_PARTS = {"slim": (_ONE_S8_BLOCK, _NO_HEAD_CONV), "no_head_conv": (_NO_HEAD_CONV,)}
+
+
 def arch_note(d):
     """The card's sentence for a detector layout other than the full one (det.ARCHS)."""
-    if d.get("arch", "full") == "full":
+    arch = d.get("arch", "full")
+    if arch == "full":
         return ""
-    if d["arch"] == "slim":
-        return ("\nSlim layout (`--det-arch slim`): one residual block at stride 8 instead of two, and the FPN's\n"
-                "stride-4 output feeds the head's 1x1 convolution directly (no 3x3 convolution between).")
-    if d["arch"] == "no_head_conv":
-        return ("\nLayout `--det-arch no_head_conv`: the FPN's stride-4 output feeds the head's 1x1 convolution\n"
-                "directly (no 3x3 convolution between).")
-    return f"\nLayout: {d['arch']}."
+    parts = ARCH_PARTS.get(arch)
+    return f"\nLayout `--det-arch {arch}`: {'; '.join(parts)}." if parts else f"\nLayout: {arch}."
 
 
 def crop_note(d):

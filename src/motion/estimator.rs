@@ -238,7 +238,7 @@ pub struct TrackView {
 #[derive(Debug, Clone)]
 struct TrackState {
     id: u32,
-    /// Time of its first observation (NaN before it).
+    /// Time of its first observation.
     first_seen: f64,
     last_seen: f64,
     filter: TrackFilter,
@@ -251,10 +251,10 @@ struct TrackState {
 }
 
 impl TrackState {
-    fn new(id: u32) -> Self {
+    fn new(id: u32, first_seen: f64) -> Self {
         Self {
             id,
-            first_seen: f64::NAN,
+            first_seen,
             last_seen: f64::NEG_INFINITY,
             filter: TrackFilter::new(),
             positions: Deque::new(),
@@ -370,7 +370,7 @@ impl ActivityEstimator {
             let idx = match self.tracks.iter().position(|s| s.id == obs.id) {
                 Some(i) => i,
                 None if self.tracks.len() < self.motion.max_tracks => {
-                    self.tracks.push(TrackState::new(obs.id));
+                    self.tracks.push(TrackState::new(obs.id, t.0));
                     self.tracks.len() - 1
                 }
                 None => {
@@ -384,9 +384,6 @@ impl ActivityEstimator {
                 continue;
             }
             s.last_seen = t.0;
-            if s.first_seen.is_nan() {
-                s.first_seen = t.0;
-            }
             let corr = s.filter.correct_box(&self.post, t, obs.bbox);
             out.boxes_corrected += (corr.width_corrected || corr.height_corrected) as u32;
             s.bbox = corr.bbox;
