@@ -30,6 +30,13 @@ def timing_note(d):
             "`make bench-infer` measures the same in fme.")
 
 
+def recipe_cmd(d):
+    """The command that trained a model: the training/Makefile target recorded by train.py (`--recipe`)."""
+    if d.get("recipe") == "bundled":
+        return "`make -C training bundled` (train.sh on whole frames, longer time budgets; training/Makefile)"
+    return "`bash training/train.sh` (or `make -C training all`)"
+
+
 def sub_note(st):
     """The card's sentence for a head with sub-cells (output stride below 4)."""
     if st == 4:
@@ -80,6 +87,16 @@ def crop_note(d):
     return f", on random {w}x{h} windows of the frames (a fish the window cuts is neither target nor background)"
 
 
+def depth_crop_note(d):
+    """Ends the depth card's training sentence: the windows it trained on, when not whole frames."""
+    if not d.get("train_crop"):
+        return ""
+    w, h = d["train_crop"]
+    until = d.get("train_crop_until", 1.0)
+    rest = ", then on whole frames" if until < 1.0 else ""
+    return f", on random {w}x{h} windows of the frames for the first {until:.0%} of the run{rest}"
+
+
 def det_card(m):
     d = m["detector"]
     data = d["data"]
@@ -122,7 +139,7 @@ layouts A to F, 640x384): training seeds {data.get('train_seeds')} ({data['train
 {len(data['val_sequences'])} sequences), never trained on. Augmentation: horizontal flip, brightness/contrast.
 
 ## Training
-`bash training/train.sh` (or `make -C training all`): CPU, torch {m.get('torch', '2.15.0')}, AdamW, one-cycle LR,
+{recipe_cmd(d)}: CPU, torch {m.get('torch', '2.15.0')}, AdamW, one-cycle LR,
 batch 16, {d['epochs']} epochs requested{stopped}, fixed seeds. Training time on the 2-core machine that trained it (shared):
 {d['train_seconds']:.0f} s{autocast_note(d)}{crop_note(d)}.
 
@@ -181,9 +198,9 @@ cores and the reference cubes, the only pixels fme reads; weight {d.get('focus_w
 
 ## Data and training
 Rendered like the detector's (see fish_det.md): training seeds {data.get('train_seeds')} ({data['train_frames']} frames
-from {len(data['train_sequences'])} sequences), held-out seeds {data.get('val_seeds')}. `bash training/train.sh` (`SKIP=det` for this
-model alone); {d['epochs']} epochs requested{stopped};
-training time {d['train_seconds']:.0f} s on the shared 2-core CPU that trained it{autocast_note(d)}.
+from {len(data['train_sequences'])} sequences), held-out seeds {data.get('val_seeds')}. {recipe_cmd(d)}
+with `SKIP=det` for this model alone; {d['epochs']} epochs requested{stopped};
+training time {d['train_seconds']:.0f} s on the shared 2-core CPU that trained it{autocast_note(d)}{depth_crop_note(d)}.
 
 ## Quality on the held-out sequences (layout of each sequence, A to F)
 Per frame, scale and shift are fitted in disparity space to the reference cubes' front-face centres

@@ -66,6 +66,8 @@ def main():
     ap.add_argument("--det-sub", type=int, default=2,
                     help="detector sub-cells per stride-4 cell and axis (2: heat map and boxes at stride 2)")
     ap.add_argument("--metrics", default=os.path.join(HERE, "metrics.json"))
+    ap.add_argument("--recipe", default="",
+                    help="the training/Makefile target that ran this (train.sh's RECIPE), for the model cards")
     ap.add_argument("--skip", default="", help="comma list of stages to skip: det,depth")
     ap.add_argument("--requantize", action="store_true",
                     help="do not train: quantise and measure the fp32 files already in --models again, keeping "
@@ -130,6 +132,9 @@ def main():
                    "arch": args.det_arch,
                    "data": data_info,
                    "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
+            res["budget_s"] = args.budget_s
+            if args.recipe:
+                res["recipe"] = args.recipe
             if det_crop:
                 res["train_crop"] = list(det_crop)
         calib = [tr_images[i].astype(np.float32).transpose(2, 0, 1) / 255.0 for i in calib_idx]
@@ -174,6 +179,9 @@ def main():
                    "autocast": "bf16" if det.use_bf16() else "fp32",
                    "data": data_info,
                    "input": [data.NET_W, data.NET_H], "focus_weight": args.depth_focus}
+            res["budget_s"] = args.depth_budget_s or args.budget_s
+            if args.recipe:
+                res["recipe"] = args.recipe
             if depth_crop:
                 res["train_crop"] = list(depth_crop)
                 res["train_crop_until"] = args.depth_crop_until
