@@ -131,8 +131,8 @@ def main():
                    "output_stride": model.stride,
                    "arch": args.det_arch,
                    "data": data_info,
-                   "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2)}
-            res["budget_s"] = args.budget_s
+                   "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2),
+                   "budget_s": args.budget_s}
             if args.recipe:
                 res["recipe"] = args.recipe
             if det_crop:
@@ -178,8 +178,8 @@ def main():
             res = {"train_seconds": round(train_s, 1), "epochs": args.depth_epochs, "epochs_run": epochs_run,
                    "autocast": "bf16" if det.use_bf16() else "fp32",
                    "data": data_info,
-                   "input": [data.NET_W, data.NET_H], "focus_weight": args.depth_focus}
-            res["budget_s"] = args.depth_budget_s or args.budget_s
+                   "input": [data.NET_W, data.NET_H], "focus_weight": args.depth_focus,
+                   "budget_s": args.depth_budget_s or args.budget_s}
             if args.recipe:
                 res["recipe"] = args.recipe
             if depth_crop:

@@ -32,6 +32,8 @@ DATA=${DATA:-/tmp/fme-train-data}
 # Where the ONNX files and metrics.json go (another folder keeps the bundled files while trying a recipe).
 MODELS=${MODELS:-$ROOT/models}
 METRICS=${METRICS:-$HERE/metrics.json}
+# Absolute, since the training runs below start in training/ (a relative DATA used to name two folders).
+DATA=$(realpath -m "$DATA") MODELS=$(realpath -m "$MODELS") METRICS=$(realpath -m "$METRICS")
 # 13 epochs over 864 sequences (the bundled run: 2,407 s on whole frames on the AMX machine; 5,616 steps,
 # about the 5,760 of 20 epochs over 576 or 40 over 288): held-out recall at conf 0.3 0.929 (24 epochs over 288) -> 0.939
 # (40 over 288) -> 0.947 (20 over 576) -> 0.954, precision 0.938 -> 0.947 (576 -> 864).
@@ -64,9 +66,8 @@ DET_ARCH=${DET_ARCH:-full}
 DET_NET=${DET_NET:-480x288}
 DEPTH_NET=${DEPTH_NET:-480x288}
 # Time budgets (seconds of training; the learning rate anneals over whichever of steps or time ends
-# first): 1,900 + 1,100 s keep the whole command near an hour on a 2-core CPU. On the AMD machine the
-# depth network then ran 12 epochs instead of the bundled run's 29 (AMX, 1,800 s) and scored 0.81 m /
-# 0.61 on the held-out frames (bundled 0.83 m / 0.60). `make -C training bundled`: 2,700 + 1,800 s.
+# first): 1,900 + 1,100 s keep the whole command near an hour on a 2-core CPU (59 minutes on the AMD
+# machine with the windows above). `make -C training bundled`: 2,700 + 1,800 s on whole frames.
 BUDGET_S=${BUDGET_S:-1900}
 DEPTH_BUDGET_S=${DEPTH_BUDGET_S:-1100}
 RECIPE=${RECIPE:-all}
