@@ -79,22 +79,18 @@ def arch_note(d):
     return f"\nLayout `--det-arch {arch}`: {'; '.join(parts)}." if parts else f"\nLayout: {arch}."
 
 
-def crop_note(d):
-    """Ends the training sentence: the windows the detector trained on, when not whole frames."""
+def crop_note(d, detail):
+    """Ends a training sentence: the windows the model trained on (then `detail`), when not whole frames."""
     if not d.get("train_crop"):
         return ""
     w, h = d["train_crop"]
-    return f", on random {w}x{h} windows of the frames (a fish the window cuts is neither target nor background)"
+    return f", on random {w}x{h} windows of the frames{detail}"
 
 
-def depth_crop_note(d):
-    """Ends the depth card's training sentence: the windows it trained on, when not whole frames."""
-    if not d.get("train_crop"):
-        return ""
-    w, h = d["train_crop"]
+def depth_crop_detail(d):
+    """How long the depth network trained on windows (`train.py --depth-crop-until`)."""
     until = d.get("train_crop_until", 1.0)
-    rest = ", then on whole frames" if until < 1.0 else ""
-    return f", on random {w}x{h} windows of the frames for the first {until:.0%} of the run{rest}"
+    return f" for the first {until:.0%} of the run, then on whole frames" if until < 1.0 else ""
 
 
 def det_card(m):
@@ -141,7 +137,7 @@ layouts A to F, 640x384): training seeds {data.get('train_seeds')} ({data['train
 ## Training
 {recipe_cmd(d)}: CPU, torch {m.get('torch', '2.15.0')}, AdamW, one-cycle LR,
 batch 16, {d['epochs']} epochs requested{stopped}, fixed seeds. Training time on the 2-core machine that trained it (shared):
-{d['train_seconds']:.0f} s{autocast_note(d)}{crop_note(d)}.
+{d['train_seconds']:.0f} s{autocast_note(d)}{crop_note(d, ' (a fish the window cuts is neither target nor background)')}.
 
 ## Quality on the held-out sequences
 Precision / recall at IoU 0.5 against the ground-truth boxes clipped to the frame; boxes with
@@ -200,7 +196,7 @@ cores and the reference cubes, the only pixels fme reads; weight {d.get('focus_w
 Rendered like the detector's (see fish_det.md): training seeds {data.get('train_seeds')} ({data['train_frames']} frames
 from {len(data['train_sequences'])} sequences), held-out seeds {data.get('val_seeds')}. {recipe_cmd(d)}
 with `SKIP=det` for this model alone; {d['epochs']} epochs requested{stopped};
-training time {d['train_seconds']:.0f} s on the shared 2-core CPU that trained it{autocast_note(d)}{depth_crop_note(d)}.
+training time {d['train_seconds']:.0f} s on the shared 2-core CPU that trained it{autocast_note(d)}{crop_note(d, depth_crop_detail(d))}.
 
 ## Quality on the held-out sequences (layout of each sequence, A to F)
 Per frame, scale and shift are fitted in disparity space to the reference cubes' front-face centres
