@@ -67,7 +67,9 @@ def upsample_note(d):
 # What each det.ARCHS layout leaves out of the full one (kept here: cards.py does not import torch).
 _ONE_S8_BLOCK = "one residual block at stride 8 instead of two"
 _NO_HEAD_CONV = "no 3x3 convolution between the FPN's stride-4 output and the head's 1x1 convolution"
-ARCH_PARTS = {"slim": (_ONE_S8_BLOCK, _NO_HEAD_CONV), "no_head_conv": (_NO_HEAD_CONV,)}
+_S8_48 = "48 channels at stride 8 and in the FPN instead of 64"
+ARCH_PARTS = {"slim": (_ONE_S8_BLOCK, _NO_HEAD_CONV), "no_head_conv": (_NO_HEAD_CONV,), "s8_48": (_S8_48,),
+              "lean": (_S8_48, _NO_HEAD_CONV)}
 
 
 def arch_note(d):

@@ -94,7 +94,9 @@ class FishDet(nn.Module):
 # Named layouts (train.py --det-arch): "full" is the bundled one; "slim" drops one stride-8 residual
 # block and the stride-4 head convolution (int8 -19% with random weights; README "A slimmer detector"),
 # "no_head_conv" only the latter (-9%).
-ARCHS = {"full": {}, "slim": {"s8_blocks": 1, "head_conv": False}, "no_head_conv": {"head_conv": False}}
+ARCHS = {"full": {}, "slim": {"s8_blocks": 1, "head_conv": False}, "no_head_conv": {"head_conv": False},
+         "s8_48": {"w": (16, 32, 48, 96, 128), "fpn": 48},
+         "lean": {"w": (16, 32, 48, 96, 128), "fpn": 48, "head_conv": False}}
 
 
 def decode(o, sub):
@@ -191,10 +193,18 @@ def from_onnx(path, sub=2):
 
     m = onnx.load(path)
     init = {i.name: numpy_helper.to_array(i) for i in m.graph.initializer}
-    # The layout from the node scopes: "/s8/s8.2/..." is the second stride-8 block, "/h/..." the head conv.
-    scopes = [n.name.strip("/").split("/") for n in m.graph.node if n.op_type == "Conv"]
+    # The layout from the node scopes: "/s8/s8.2/..." is the second stride-8 block, "/h/..." the head conv;
+    # the widths from the output channels of each stage's first convolution and of the FPN's laterals.
+    convs = [n for n in m.graph.node if n.op_type == "Conv"]
+    scopes = [n.name.strip("/").split("/") for n in convs]
     s8 = {int(p[1].split(".")[1]) for p in scopes if len(p) > 2 and p[0] == "s8" and p[1].startswith("s8.")}
-    model = FishDet(sub=sub, s8_blocks=max(s8, default=0), head_conv=any(p[0] == "h" for p in scopes))
+    out_ch = {p[0] if p[0] in ("stem", "l32", "l4") else "/".join(p[:3]): init[n.input[1]].shape[0]
+              for n, p in zip(convs, scopes) if n.input[1] in init}
+    firsts = ["stem"] + [f"{s}/{s}.0/{s}.0.0" for s in ("s4", "s8", "s16", "s32")]
+    widths = {}
+    if all(k in out_ch for k in firsts + ["l32", "l4"]):
+        widths = {"w": tuple(int(out_ch[k]) for k in firsts), "fpn": int(out_ch["l32"]), "head": int(out_ch["l4"])}
+    model = FishDet(sub=sub, s8_blocks=max(s8, default=0), head_conv=any(p[0] == "h" for p in scopes), **widths)
     mods = dict(model.named_modules())
     done = set()
 
