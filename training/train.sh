@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # One command that re-trains fme's models from scratch in about an hour on a 2-core CPU (issue 5):
 #   bash training/train.sh            # or: make -C training all
-# (59 minutes on the AMD EPYC of README "Re-training in an hour", rendering included, venv present).
+# (59 minutes on the AMD EPYC of README "Re-training in an hour" with the full detector layout, about 60
+# with s8_48, rendering included, venv present).
 # The bundled models/*.onnx came from the longer recipe `make -C training bundled` (whole frames,
 # BUDGET_S=2700, DEPTH_BUDGET_S=1800).
 # 1. builds `fme` (needs the `fme synth` generator) and renders training and held-out swarm
