@@ -95,9 +95,9 @@ class FishDet(nn.Module):
 # block and the stride-4 head convolution (int8 -19% with random weights; README "A slimmer detector"),
 # "no_head_conv" only the latter (-9%); "s8_48" runs stride 8 and the FPN at 48 channels (-17%; train.sh's
 # layout, README "Narrower at stride 8"), "lean" both that and no head convolution (-23%).
+_S8_48 = {"w": (16, 32, 48, 96, 128), "fpn": 48}
 ARCHS = {"full": {}, "slim": {"s8_blocks": 1, "head_conv": False}, "no_head_conv": {"head_conv": False},
-         "s8_48": {"w": (16, 32, 48, 96, 128), "fpn": 48},
-         "lean": {"w": (16, 32, 48, 96, 128), "fpn": 48, "head_conv": False}}
+         "s8_48": _S8_48, "lean": {**_S8_48, "head_conv": False}}
 
 
 def decode(o, sub):
@@ -194,18 +194,22 @@ def from_onnx(path, sub=2):
 
     m = onnx.load(path)
     init = {i.name: numpy_helper.to_array(i) for i in m.graph.initializer}
-    # The layout from the node scopes: "/s8/s8.2/..." is the second stride-8 block, "/h/..." the head conv;
-    # the widths from the output channels of each stage's first convolution and of the FPN's laterals.
-    convs = [n for n in m.graph.node if n.op_type == "Conv"]
-    scopes = [n.name.strip("/").split("/") for n in convs]
-    s8 = {int(p[1].split(".")[1]) for p in scopes if len(p) > 2 and p[0] == "s8" and p[1].startswith("s8.")}
-    out_ch = {p[0] if p[0] in ("stem", "l32", "l4") else "/".join(p[:3]): init[n.input[1]].shape[0]
-              for n, p in zip(convs, scopes) if n.input[1] in init}
-    firsts = ["stem"] + [f"{s}/{s}.0/{s}.0.0" for s in ("s4", "s8", "s16", "s32")]
+    def module_name(node):
+        # Scope "/s4/s4.1/a/a.0/Conv" is module "s4.1.a.0" (Sequential children carry their parent's
+        # name as a prefix); its BatchNorm is the next child, "s4.1.a.1".
+        scope = node.name.strip("/").split("/")[:-1]
+        return ".".join([scope[0]] + [p.split(".")[-1] for p in scope[1:]])
+
+    # The layout from the module names ("s8.2.*" is the second stride-8 block, "h.*" the head conv), the
+    # widths from the output channels of each stage's first convolution and of the FPN's laterals.
+    out_ch = {module_name(n): int(init[n.input[1]].shape[0]) for n in m.graph.node
+              if n.op_type == "Conv" and n.input[1] in init}
+    s8 = {int(k.split(".")[1]) for k in out_ch if k.startswith("s8.")}
+    firsts = ["stem.0", "s4.0.0", "s8.0.0", "s16.0.0", "s32.0.0"]
     widths = {}
-    if all(k in out_ch for k in firsts + ["l32", "l4"]):
-        widths = {"w": tuple(int(out_ch[k]) for k in firsts), "fpn": int(out_ch["l32"]), "head": int(out_ch["l4"])}
-    model = FishDet(sub=sub, s8_blocks=max(s8, default=0), head_conv=any(p[0] == "h" for p in scopes), **widths)
+    if all(k in out_ch for k in firsts + ["l32.0", "l4.0"]):
+        widths = {"w": tuple(out_ch[k] for k in firsts), "fpn": out_ch["l32.0"], "head": out_ch["l4.0"]}
+    model = FishDet(sub=sub, s8_blocks=max(s8, default=0), head_conv=any(k.startswith("h.") for k in out_ch), **widths)
     mods = dict(model.named_modules())
     done = set()
 
@@ -224,10 +228,7 @@ def from_onnx(path, sub=2):
             continue
         if n.op_type != "Conv":
             continue
-        # Scope "/s4/s4.1/a/a.0/Conv" is module "s4.1.a.0" (Sequential children carry their parent's
-        # name as a prefix); its BatchNorm is the next child, "s4.1.a.1".
-        scope = n.name.strip("/").split("/")[:-1]
-        mod_name = ".".join([scope[0]] + [p.split(".")[-1] for p in scope[1:]])
+        mod_name = module_name(n)
         if mod_name == "out":
             set_head(init[n.input[1]], init[n.input[2]], "head convolution")
             continue
