@@ -71,7 +71,8 @@ _S8_48 = "48 channels at stride 8 and in the FPN instead of 64"
 _SEP = "every stride-1 3x3 convolution depthwise-separable (3x3 per channel, then 1x1)"
 _SEP48 = "the stride-1 3x3 convolutions at strides 4 and 8 depthwise-separable (3x3 per channel, then 1x1)"
 ARCH_PARTS = {"slim": (_ONE_S8_BLOCK, _NO_HEAD_CONV), "no_head_conv": (_NO_HEAD_CONV,), "s8_48": (_S8_48,),
-              "lean": (_S8_48, _NO_HEAD_CONV), "sep": (_SEP,), "sep48": (_SEP48,)}
+              "lean": (_S8_48, _NO_HEAD_CONV), "sep": (_SEP,), "sep48": (_SEP48,),
+              "s8_48_sep4": (_S8_48, "the stride-1 3x3 convolutions at stride 4 depthwise-separable")}
 
 
 def arch_note(d):

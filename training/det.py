@@ -28,8 +28,8 @@ def conv(cin, cout, s=1, k=3):
 
 def sep_conv(cin, cout, relu=True):
     """A depthwise-separable 3x3 convolution (MobileNet): depthwise 3x3, then pointwise 1x1, each with
-    its BatchNorm. In int8 ONNX Runtime runs both in about a third of a full 3x3 convolution's time
-    at these widths (README "Depthwise-separable detector")."""
+    its BatchNorm. In int8 ONNX Runtime runs the two in a third (stride 8) to a half (stride 4) of a
+    full 3x3 convolution's time at these widths (README "Depthwise-separable detector")."""
     layers = [nn.Conv2d(cin, cin, 3, 1, 1, groups=cin, bias=False), nn.BatchNorm2d(cin), nn.ReLU(inplace=True),
               nn.Conv2d(cin, cout, 1, bias=False), nn.BatchNorm2d(cout)]
     return nn.Sequential(*layers, nn.ReLU(inplace=True)) if relu else nn.Sequential(*layers)
@@ -44,7 +44,9 @@ class Block(nn.Module):
     def __init__(self, c, sep=False):
         super().__init__()
         self.a = conv3(c, c, sep)
-        self.b = sep_conv(c, c, relu=False) if sep else nn.Sequential(nn.Conv2d(c, c, 3, 1, 1, bias=False), nn.BatchNorm2d(c))
+        # No ReLU before the residual sum.
+        self.b = (sep_conv(c, c, relu=False) if sep
+                  else nn.Sequential(nn.Conv2d(c, c, 3, 1, 1, bias=False), nn.BatchNorm2d(c)))
 
     def forward(self, x):
         return F.relu(x + self.b(self.a(x)))
@@ -113,13 +115,15 @@ class FishDet(nn.Module):
 # "no_head_conv" only the latter (-9%); "s8_48" runs stride 8 and the FPN at 48 channels (-17%; train.sh's
 # layout, README "Narrower at stride 8"), "lean" both that and no head convolution (-23%); "sep" makes every
 # stride-1 3x3 convolution depthwise-separable (-28% with 2 threads, -42% with 1), "sep48" only those at
-# strides 4 and 8 (-20%, -30%; README "Depthwise-separable detector").
+# strides 4 and 8 (-20%, -30%), "s8_48_sep4" s8_48 with those at stride 4 separable (-23%, -24%; README
+# "Depthwise-separable detector").
 _S8_48 = {"w": (16, 32, 48, 96, 128), "fpn": 48}
 # The parts with stride-1 3x3 convolutions: backbone stages, FPN merges, head.
 SEP_PARTS = ("s4", "s8", "s16", "s32", "m4", "m8", "m16", "h")
 ARCHS = {"full": {}, "slim": {"s8_blocks": 1, "head_conv": False}, "no_head_conv": {"head_conv": False},
          "s8_48": _S8_48, "lean": {**_S8_48, "head_conv": False},
-         "sep": {"sep": SEP_PARTS}, "sep48": {"sep": ("s4", "s8", "m4", "m8", "h")}}
+         "sep": {"sep": SEP_PARTS}, "sep48": {"sep": ("s4", "s8", "m4", "m8", "h")},
+         "s8_48_sep4": {**_S8_48, "sep": ("s4", "m4", "h")}}
 
 
 def decode(o, sub):

@@ -17,7 +17,7 @@
 # DET_SUB (detector output sub-cells, default 2), DEPTH_FOCUS (weight of the depth loss's focus term on fish and cubes), DET_NET, DEPTH_NET (WxH),
 # DET_CROP (WxH: the detector trains on random windows of that size, fish the window cuts ignored; default 384x256;
 # empty: whole frames),
-# DET_ARCH (detector layout, det.ARCHS: full, slim, no_head_conv, s8_48, lean, sep or sep48),
+# DET_ARCH (detector layout, det.ARCHS: full, slim, no_head_conv, s8_48, lean, sep, sep48 or s8_48_sep4),
 # DEPTH_CROP (WxH: the depth network trains on random windows of that size; default 320x192; empty: whole
 # frames) and DEPTH_CROP_UNTIL (fraction of the depth run after which it goes on with whole frames, default 0.8),
 # TRAIN_SEQS (sequences rendered, default 864), DET_SEQS and DEPTH_SEQS (the first N of them each model
