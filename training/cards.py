@@ -68,11 +68,15 @@ def upsample_note(d):
 _ONE_S8_BLOCK = "one residual block at stride 8 instead of two"
 _NO_HEAD_CONV = "no 3x3 convolution between the FPN's stride-4 output and the head's 1x1 convolution"
 _S8_48 = "48 channels at stride 8 and in the FPN instead of 64"
-_SEP = "every stride-1 3x3 convolution depthwise-separable (3x3 per channel, then 1x1)"
-_SEP48 = "the stride-1 3x3 convolutions at strides 4 and 8 depthwise-separable (3x3 per channel, then 1x1)"
+
+
+def _sep(where):
+    return f"the stride-1 3x3 convolutions {where} depthwise-separable (3x3 per channel, then 1x1)"
+
+
 ARCH_PARTS = {"slim": (_ONE_S8_BLOCK, _NO_HEAD_CONV), "no_head_conv": (_NO_HEAD_CONV,), "s8_48": (_S8_48,),
-              "lean": (_S8_48, _NO_HEAD_CONV), "sep": (_SEP,), "sep48": (_SEP48,),
-              "s8_48_sep4": (_S8_48, "the stride-1 3x3 convolutions at stride 4 depthwise-separable")}
+              "lean": (_S8_48, _NO_HEAD_CONV), "sep": (_sep("everywhere"),), "sep48": (_sep("at strides 4 and 8"),),
+              "s8_48_sep4": (_S8_48, _sep("at stride 4"))}
 
 
 def arch_note(d):
