@@ -22,8 +22,9 @@ STRIDE = 4  # stride of the head's features; the output stride is STRIDE // sub
 SIGMA_MIN_PX = 2.4
 
 
-def conv(cin, cout, s=1, k=3):
-    return nn.Sequential(nn.Conv2d(cin, cout, k, s, k // 2, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True))
+def conv(cin, cout, s=1, k=3, relu=True):
+    layers = [nn.Conv2d(cin, cout, k, s, k // 2, bias=False), nn.BatchNorm2d(cout)]
+    return nn.Sequential(*layers, nn.ReLU(inplace=True)) if relu else nn.Sequential(*layers)
 
 
 def sep_conv(cin, cout, relu=True):
@@ -35,18 +36,16 @@ def sep_conv(cin, cout, relu=True):
     return nn.Sequential(*layers, nn.ReLU(inplace=True)) if relu else nn.Sequential(*layers)
 
 
-def conv3(cin, cout, sep):
-    """A stride-1 3x3 convolution with BatchNorm and ReLU: full, or depthwise-separable with sep."""
-    return sep_conv(cin, cout) if sep else conv(cin, cout)
+def conv3(cin, cout, sep, relu=True):
+    """A stride-1 3x3 convolution with BatchNorm [and ReLU]: full, or depthwise-separable with sep."""
+    return sep_conv(cin, cout, relu) if sep else conv(cin, cout, relu=relu)
 
 
 class Block(nn.Module):
     def __init__(self, c, sep=False):
         super().__init__()
         self.a = conv3(c, c, sep)
-        # No ReLU before the residual sum.
-        self.b = (sep_conv(c, c, relu=False) if sep
-                  else nn.Sequential(nn.Conv2d(c, c, 3, 1, 1, bias=False), nn.BatchNorm2d(c)))
+        self.b = conv3(c, c, sep, relu=False)  # no ReLU before the residual sum
 
     def forward(self, x):
         return F.relu(x + self.b(self.a(x)))
