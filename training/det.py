@@ -393,6 +393,26 @@ def loss_fn(r, heat, reg, weight, giou_weight=1.0, ignore=None):
     return loss
 
 
+# Distillation (train(teacher=...)): a teacher's heat-map cells at least this confident also teach the
+# student their box regression.
+KD_REG_MIN = 0.3
+
+
+def kd_loss(r, t, npos, ignore=None):
+    """Knowledge distillation from a teacher's raw output `t` (same layout as the student's `r`, no
+    gradient): the binary KL divergence between the two heat maps on every cell (zero where they agree;
+    the teacher's soft scores also rank neighbours and look-alikes, which the 0/1 targets do not) plus an
+    L1 on the box regression where the teacher scores at least KD_REG_MIN, weighted by that score; both
+    normalised by the number of ground-truth fish `npos`, as `loss_fn` is. `ignore` as in `loss_fn`."""
+    pt = torch.sigmoid(t[:, 0]).clamp(1e-4, 1 - 1e-4)
+    ls, l1s = F.logsigmoid(r[:, 0]), F.logsigmoid(-r[:, 0])
+    kl = pt * (torch.log(pt) - ls) + (1 - pt) * (torch.log(1 - pt) - l1s)
+    keep = 1.0 - ignore if ignore is not None else torch.ones_like(pt)
+    w = pt * (pt >= KD_REG_MIN).float() * keep
+    rl = (F.l1_loss(r[:, 1:5], t[:, 1:5], reduction="none").sum(1) * w).sum()
+    return ((kl * keep).sum() + rl) / npos
+
+
 def augment(img, boxes, rng, out):
     """Horizontal flip and mild photometric jitter (the generator already varies water and light) of
     an HxWx3 uint8 image, written as float32 (0..255) into `out`; returns the boxes. Each step is one
@@ -445,18 +465,27 @@ def train_forward(model, x, bf16):
 
 
 def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=print, time_budget_s=None, spread=True,
-          giou_weight=1.0, sub=1, crop=None, arch="full"):
+          giou_weight=1.0, sub=1, crop=None, arch="full", teacher=None, kd_weight=1.0):
     """Returns the trained model and the number of epochs run (the time budget may stop it early).
 
     `crop` (w, h in input pixels, multiples of 32): each training frame is a random window of that
     size instead of the whole frame (the network is fully convolutional; the export keeps the full
     input size), so a step costs about the window's share of the pixels. Boxes are shifted into the
     window; a fish the window cuts (`cut_by_window`) gets no target and no background loss on its
-    cells (`ignore_mask`). Without `crop` nothing changes: the same random draws, the same model."""
+    cells (`ignore_mask`). Without `crop` nothing changes: the same random draws, the same model.
+
+    `teacher` (a FishDet with the same `sub`, e.g. `from_onnx` of the bundled detector): each batch also
+    runs through it, and `kd_weight` times `kd_loss` joins the loss (same random draws as without it)."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     model = FishDet(sub=sub, **ARCHS[arch]).to(memory_format=torch.channels_last)
     bf16 = use_bf16()
+    if teacher is not None:
+        if teacher.sub != sub:
+            raise SystemExit(f"distillation teacher has sub={teacher.sub}, the student sub={sub}")
+        teacher = teacher.to(memory_format=torch.channels_last).eval()
+        log(f"det: distilling from a teacher ({sum(p.numel() for p in teacher.parameters())} parameters), "
+            f"weight {kd_weight}")
     log(f"det: {arch}, {'bf16 autocast' if bf16 else 'fp32'}, channels-last, output stride {model.stride}"
         + (f", random {crop[0]}x{crop[1]} crops" if crop else ""))
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
@@ -501,10 +530,15 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
                 rs.append(r)
                 ms.append(m)
             xs /= 255.0
-            out = train_forward(model, torch.from_numpy(xs).permute(0, 3, 1, 2), bf16)
-            loss = loss_fn(out, torch.from_numpy(np.stack(hs)), torch.from_numpy(np.stack(rs)),
-                           torch.from_numpy(np.stack(ms)), giou_weight,
-                           torch.from_numpy(np.stack(igs)) if crop else None)
+            x = torch.from_numpy(xs).permute(0, 3, 1, 2)
+            out = train_forward(model, x, bf16)
+            heat = torch.from_numpy(np.stack(hs))
+            ign = torch.from_numpy(np.stack(igs)) if crop else None
+            loss = loss_fn(out, heat, torch.from_numpy(np.stack(rs)), torch.from_numpy(np.stack(ms)), giou_weight, ign)
+            if teacher is not None:
+                with torch.no_grad():
+                    t_out = train_forward(teacher, x, bf16)
+                loss = loss + kd_weight * kd_loss(out, t_out, heat.eq(1.0).sum().clamp(min=1.0), ign)
             opt.zero_grad()
             loss.backward()
             opt.step()

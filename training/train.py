@@ -65,6 +65,9 @@ def main():
                          "no_head_conv (only the latter)")
     ap.add_argument("--det-sub", type=int, default=2,
                     help="detector sub-cells per stride-4 cell and axis (2: heat map and boxes at stride 2)")
+    ap.add_argument("--det-teacher", default="",
+                    help="an fp32 FishDet ONNX file (e.g. ../models/fish_det_fp32.onnx) to distil the detector from")
+    ap.add_argument("--kd-weight", type=float, default=1.0, help="with --det-teacher: weight of the distillation loss")
     ap.add_argument("--metrics", default=os.path.join(HERE, "metrics.json"))
     ap.add_argument("--recipe", default="",
                     help="the training/Makefile target that ran this (train.sh's RECIPE), for the model cards")
@@ -119,10 +122,12 @@ def main():
                 det.export(det.from_onnx(fp32, args.det_sub), fp32, data.NET_H, data.NET_W)
                 log(f"detector: re-exported {fp32} from its own weights")
         else:
+            # Read before training: the teacher may be the very file this run overwrites.
+            teacher = det.from_onnx(args.det_teacher, args.det_sub) if args.det_teacher else None
             t1 = time.time()
             model, epochs_run = det.train(tr_images, tr_boxes, args.det_epochs, log=log,
                                           time_budget_s=args.budget_s, sub=args.det_sub, crop=det_crop,
-                                          arch=args.det_arch)
+                                          arch=args.det_arch, teacher=teacher, kd_weight=args.kd_weight)
             train_s = time.time() - t1
             det.export(model, fp32, data.NET_H, data.NET_W)
             res = {"train_seconds": round(train_s, 1), "epochs": args.det_epochs, "epochs_run": epochs_run,
@@ -137,6 +142,8 @@ def main():
                 res["recipe"] = args.recipe
             if det_crop:
                 res["train_crop"] = list(det_crop)
+            if teacher is not None:
+                res["teacher"] = {"file": os.path.basename(args.det_teacher), "kd_weight": args.kd_weight}
         calib = [tr_images[i].astype(np.float32).transpose(2, 0, 1) / 255.0 for i in calib_idx]
         res["float_stem"] = True
         paths, ms = quantize_and_time(args.models, "fish_det", fp32, calib, "images", res, float_stem=True)

@@ -65,7 +65,8 @@ DET_CROP=${DET_CROP-384x256}
 # better (README "A slimmer detector"); so does lean. s8_48 (48 channels at stride 8 and in the FPN) on
 # the windows above: the full layout's held-out P / R at conf 0.4, 11-17% faster in fme with 1 thread
 # (fme's default), 3-7% with 2 (README "Narrower at stride 8"). The depthwise-separable layouts (sep, sep48,
-# s8_48_sep4) are faster still but miss P / R 0.95 in the hour (README "Depthwise-separable detector").
+# s8_48_sep4) are faster still but miss P / R 0.95 in the hour, trained longer or distilled from the
+# bundled detector (TRAIN_ARGS="--det-teacher FILE"; README "Depthwise-separable detector").
 # The bundled detector is full.
 DET_ARCH=${DET_ARCH:-s8_48}
 DET_NET=${DET_NET:-480x288}
