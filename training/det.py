@@ -407,7 +407,7 @@ def kd_loss(r, t, npos, ignore=None):
     pt = torch.sigmoid(t[:, 0]).clamp(1e-4, 1 - 1e-4)
     ls, l1s = F.logsigmoid(r[:, 0]), F.logsigmoid(-r[:, 0])
     kl = pt * (torch.log(pt) - ls) + (1 - pt) * (torch.log(1 - pt) - l1s)
-    keep = 1.0 - ignore if ignore is not None else torch.ones_like(pt)
+    keep = 1.0 - ignore if ignore is not None else 1.0
     w = pt * (pt >= KD_REG_MIN).float() * keep
     rl = (F.l1_loss(r[:, 1:5], t[:, 1:5], reduction="none").sum(1) * w).sum()
     return ((kl * keep).sum() + rl) / npos

@@ -67,7 +67,8 @@ def main():
                     help="detector sub-cells per stride-4 cell and axis (2: heat map and boxes at stride 2)")
     ap.add_argument("--det-teacher", default="",
                     help="an fp32 FishDet ONNX file (e.g. ../models/fish_det_fp32.onnx) to distil the detector from")
-    ap.add_argument("--kd-weight", type=float, default=1.0, help="with --det-teacher: weight of the distillation loss")
+    ap.add_argument("--kd-weight", type=float, default=None,
+                    help="with --det-teacher: weight of the distillation loss (default 1)")
     ap.add_argument("--metrics", default=os.path.join(HERE, "metrics.json"))
     ap.add_argument("--recipe", default="",
                     help="the training/Makefile target that ran this (train.sh's RECIPE), for the model cards")
@@ -80,6 +81,9 @@ def main():
                          "their own weights (detector: det.py's export graph; depth: depth.fast_tail)")
     args = ap.parse_args()
     args.requantize = args.requantize or args.reexport
+    if args.kd_weight is not None and not args.det_teacher:
+        raise SystemExit(f"--kd-weight {args.kd_weight}: only with --det-teacher (the distillation it weights)")
+    args.kd_weight = 1.0 if args.kd_weight is None else args.kd_weight
     depth_crop = parse_crop(args.depth_crop, data.NET_W, data.NET_H)  # before the data loads
     det_crop = parse_crop(args.det_crop, data.NET_W, data.NET_H, "--det-crop")
     if not 0.0 < args.depth_crop_until <= 1.0:
