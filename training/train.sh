@@ -56,8 +56,8 @@ DEPTH_CROP=${DEPTH_CROP-320x192}
 DEPTH_CROP_UNTIL=${DEPTH_CROP_UNTIL:-0.8}
 # Detector windows (README "Detector on crops", "Re-training in an hour"): a 384x256 window ran a step
 # 1.3-1.7x faster on the AMD machine; there 1,900 s made 12 epochs with held-out int8 P / R 0.955 / 0.953
-# at conf 0.4 (bundled, whole frames, 2,407 s on the AMX machine: 0.962 / 0.952). DET_CROP= (empty)
-# trains on whole frames, as the bundled detector did.
+# at conf 0.4 (bundled, whole frames, 2,407 s on the AMX machine: 0.962 / 0.952; s8_48 on whole frames,
+# 2,570 s here: 0.950 / 0.950). DET_CROP= (empty) trains on whole frames, as the bundled detector did.
 DET_CROP=${DET_CROP-384x256}
 # Detector layout: slim (one stride-8 block and the stride-4 head convolution less) ran 14-16% faster in fme
 # but lost held-out precision (and recall on whole frames); no_head_conv on 384x256 windows kept both but
