@@ -371,6 +371,11 @@ def giou(p, t):
     return inter / union - (hull - union) / hull
 
 
+def fish_count(heat):
+    """The losses' normaliser: ground-truth fish (heat-map peaks of 1) in the batch, at least 1."""
+    return heat.eq(1.0).sum().clamp(min=1.0)
+
+
 def loss_fn(r, heat, reg, weight, giou_weight=1.0, ignore=None):
     """Focal loss on the heat map (CenterNet), L1 on the regression targets and, with giou_weight,
     a GIoU loss on the decoded boxes (the quantity IoU 0.5 matching scores), both weighted per cell.
@@ -382,7 +387,7 @@ def loss_fn(r, heat, reg, weight, giou_weight=1.0, ignore=None):
         neg = neg * (1.0 - ignore)
     pl = -(torch.log(p) * (1 - p) ** 2 * pos).sum()
     nl = -(torch.log(1 - p) * p ** 2 * (1 - heat) ** 4 * neg).sum()
-    npos = pos.sum().clamp(min=1.0)
+    npos = fish_count(heat)
     rl = (F.l1_loss(r[:, 1:5], reg, reduction="none").sum(1) * weight).sum() / npos
     loss = (pl + nl) / npos + rl
     cells = weight > 0
@@ -398,19 +403,19 @@ def loss_fn(r, heat, reg, weight, giou_weight=1.0, ignore=None):
 KD_REG_MIN = 0.3
 
 
-def kd_loss(r, t, npos, ignore=None):
+def kd_loss(r, t, heat, ignore=None):
     """Knowledge distillation from a teacher's raw output `t` (same layout as the student's `r`, no
     gradient): the binary KL divergence between the two heat maps on every cell (zero where they agree;
     the teacher's soft scores also rank neighbours and look-alikes, which the 0/1 targets do not) plus an
     L1 on the box regression where the teacher scores at least KD_REG_MIN, weighted by that score; both
-    normalised by the number of ground-truth fish `npos`, as `loss_fn` is. `ignore` as in `loss_fn`."""
+    normalised by the ground-truth fish in `heat` (`fish_count`), as `loss_fn` is. `ignore` as in `loss_fn`."""
     pt = torch.sigmoid(t[:, 0]).clamp(1e-4, 1 - 1e-4)
     ls, l1s = F.logsigmoid(r[:, 0]), F.logsigmoid(-r[:, 0])
     kl = pt * (torch.log(pt) - ls) + (1 - pt) * (torch.log(1 - pt) - l1s)
     keep = 1.0 - ignore if ignore is not None else 1.0
     w = pt * (pt >= KD_REG_MIN).float() * keep
     rl = (F.l1_loss(r[:, 1:5], t[:, 1:5], reduction="none").sum(1) * w).sum()
-    return ((kl * keep).sum() + rl) / npos
+    return ((kl * keep).sum() + rl) / fish_count(heat)
 
 
 def augment(img, boxes, rng, out):
@@ -538,7 +543,7 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
             if teacher is not None:
                 with torch.no_grad():
                     t_out = train_forward(teacher, x, bf16)
-                loss = loss + kd_weight * kd_loss(out, t_out, heat.eq(1.0).sum().clamp(min=1.0), ign)
+                loss = loss + kd_weight * kd_loss(out, t_out, heat, ign)
             opt.zero_grad()
             loss.backward()
             opt.step()
