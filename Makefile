@@ -4,7 +4,7 @@
 CARGO ?= cargo
 BIN := target/release/fme
 
-.PHONY: all setup build test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer four-groups clean
+.PHONY: all setup build test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer bench-anchors four-groups clean
 
 all: build
 
@@ -61,6 +61,10 @@ bench-track: build
 	bash scripts/mot15_parity.sh $(BIN)
 bench-infer: setup
 	$(CARGO) bench --locked --bench infer
+# Issue 5's anchor models (YOLO11n) timed beside the bundled int8 files: this machine against the
+# anchors' (needs the ~6 GB Python stack of training/requirements.txt; not part of `bench`).
+bench-anchors:
+	bash scripts/anchor_timing.sh
 # The paper's four groups (GT/predicted boxes x GT/estimated depth) with the bundled models on held-out
 # synthetic sequences, two sets of seeds (about 20 minutes; sequences cached in target/four-groups).
 four-groups: build

@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# Issue 5's reference models (YOLO11n, random weights, as in ../shared/research/onnx-timings.md) timed
+# turn by turn with the bundled int8 networks: how this machine compares with the one the issue's
+# anchors came from (scripts/anchor_timing.py). Needs the Python stack of training/requirements.txt in
+# $VENV (default /tmp/venv-infer; created if missing, a ~6 GB torch install from PyPI). A benchmark,
+# not a test: nothing here is in make test or CI. Arguments go to the Python script (--rounds, --json...).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+VENV=${VENV:-/tmp/venv-infer}
+if [ ! -x "$VENV/bin/python" ]; then
+  python3 -m venv "$VENV"
+  "$VENV/bin/pip" install -q -r training/requirements.txt
+fi
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+# Ultralytics writes its export next to the working directory; keep that out of the repo.
+(cd "$work" && "$VENV/bin/python" "$OLDPWD/scripts/anchor_timing.py" "$@")
