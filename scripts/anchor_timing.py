@@ -37,7 +37,8 @@ ANCHORS = {("yolo11n_320_fp32", 2): 9.55, ("yolo11n_320_fp32", 1): 15.2,
 
 
 def export_anchors(out):
-    """The three anchor files in `out` (kept between runs: the export takes about a minute)."""
+    """The three anchor files in `out`, exported and quantised on the first run and kept for the next ones."""
+    out = os.path.abspath(out)
     paths = {n: os.path.join(out, f"{n}.onnx") for n in ("yolo11n_320_fp32", "yolo11n_640_fp32", "yolo11n_320_u8s8")}
     if all(os.path.exists(p) for p in paths.values()):
         return paths
@@ -52,14 +53,18 @@ def export_anchors(out):
     if "nc: 80" not in cfg:
         raise SystemExit("anchor_timing: Ultralytics' yolo11.yaml has no 'nc: 80' line to set to 1")
     torch.manual_seed(0)
+    here = os.getcwd()
     with tempfile.TemporaryDirectory() as work:
-        # The file name carries the scale ("n"); Ultralytics writes its export next to it.
-        yaml = os.path.join(work, "yolo11n.yaml")
-        with open(yaml, "w") as f:
-            f.write(cfg.replace("nc: 80", "nc: 1"))
-        for size in (320, 640):
-            shutil.move(YOLO(yaml).export(format="onnx", imgsz=size, dynamic=False, simplify=True, opset=17),
-                        paths[f"yolo11n_{size}_fp32"])
+        # The file name carries the scale ("n"); Ultralytics writes its export into the working directory.
+        os.chdir(work)
+        try:
+            with open("yolo11n.yaml", "w") as f:
+                f.write(cfg.replace("nc: 80", "nc: 1"))
+            for size in (320, 640):
+                shutil.move(YOLO("yolo11n.yaml").export(format="onnx", imgsz=size, dynamic=False, simplify=True,
+                                                        opset=17), paths[f"yolo11n_{size}_fp32"])
+        finally:
+            os.chdir(here)
     rng = np.random.default_rng(0)
     calib = [rng.random((3, 320, 320), dtype=np.float32) for _ in range(20)]
     name = ort.InferenceSession(paths["yolo11n_320_fp32"], providers=["CPUExecutionProvider"]).get_inputs()[0].name

@@ -5,13 +5,10 @@
 # $VENV (default /tmp/venv-infer; created if missing, a ~6 GB torch install from PyPI). A benchmark,
 # not a test: nothing here is in make test or CI. Arguments go to the Python script (--rounds, --json...).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+root=$(cd "$(dirname "$0")/.." && pwd)
 VENV=${VENV:-/tmp/venv-infer}
 if [ ! -x "$VENV/bin/python" ]; then
   python3 -m venv "$VENV"
-  "$VENV/bin/pip" install -q -r training/requirements.txt
+  "$VENV/bin/pip" install -q -r "$root/training/requirements.txt"
 fi
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
-# Ultralytics writes its export next to the working directory; keep that out of the repo.
-(cd "$work" && "$VENV/bin/python" "$OLDPWD/scripts/anchor_timing.py" "$@")
+exec "$VENV/bin/python" "$root/scripts/anchor_timing.py" "$@"
