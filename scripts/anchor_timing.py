@@ -29,6 +29,7 @@ import onnxruntime as ort
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "training"))
+import evaluate  # noqa: E402  (training/: session options and the timing input, as the model cards use)
 
 # ms, median of 50 runs after 5 warm-ups, onnx-timings.md (YOLO11n nc=1 rows).
 ANCHORS = {("yolo11n_320_fp32", 2): 9.55, ("yolo11n_320_fp32", 1): 15.2,
@@ -67,21 +68,9 @@ def export_anchors(out):
             os.chdir(here)
     rng = np.random.default_rng(0)
     calib = [rng.random((3, 320, 320), dtype=np.float32) for _ in range(20)]
-    name = ort.InferenceSession(paths["yolo11n_320_fp32"], providers=["CPUExecutionProvider"]).get_inputs()[0].name
+    name = evaluate.session(paths["yolo11n_320_fp32"]).get_inputs()[0].name
     quant.quantize(paths["yolo11n_320_fp32"], paths["yolo11n_320_u8s8"], calib, name, upsample_rewrite=False)
     return paths
-
-
-def session(path, threads, spin):
-    so = ort.SessionOptions()
-    so.intra_op_num_threads = threads
-    so.inter_op_num_threads = 1
-    if not spin:
-        so.add_session_config_entry("session.intra_op.allow_spinning", "0")
-    s = ort.InferenceSession(path, so, providers=["CPUExecutionProvider"])
-    i = s.get_inputs()[0]
-    x = np.random.default_rng(0).random([d if isinstance(d, int) else 1 for d in i.shape], dtype=np.float32)
-    return s, {i.name: x}
 
 
 def steal_and_total():
@@ -105,9 +94,13 @@ def main():
         if not os.path.exists(p):
             raise SystemExit(f"anchor_timing: {p} not found")
         rows += [(f"{net}_int8", p, False), (f"{net}_int8_spinning", p, True)]
-    result = {"ort": ort.__version__, "rounds": a.rounds, "runs": a.runs, "threads": {}}
+    result = {"cpu": evaluate.cpu_name(), "ort": ort.__version__, "rounds": a.rounds, "runs": a.runs, "threads": {}}
+    print(f"{evaluate.cpu_name()}, ONNX Runtime {ort.__version__}")
     for threads in (2, 1):
-        sessions = [(n, *session(p, threads, spin)) for n, p, spin in rows]
+        sessions = []
+        for n, p, spin in rows:
+            s = evaluate.session(p, threads, spin)
+            sessions.append((n, s, evaluate.random_feed(s)))
         for _, s, feed in sessions:
             for _ in range(5):
                 s.run(None, feed)

@@ -20,12 +20,21 @@ import data
 VIS_REQUIRED = 0.5
 
 
-def session(path, threads=2):
+def session(path, threads=2, spin=False):
+    """An ONNX Runtime CPU session; idle worker threads sleep unless `spin` (fme's default is to sleep)."""
     so = ort.SessionOptions()
     so.intra_op_num_threads = threads
     so.inter_op_num_threads = 1
-    so.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    if not spin:
+        so.add_session_config_entry("session.intra_op.allow_spinning", "0")
     return ort.InferenceSession(path, so, providers=["CPUExecutionProvider"])
+
+
+def random_feed(sess):
+    """A fixed random input for timing `sess` (dynamic dimensions as 1)."""
+    i = sess.get_inputs()[0]
+    x = np.random.default_rng(0).random([d if isinstance(d, int) else 1 for d in i.shape], dtype=np.float32)
+    return {i.name: x}
 
 
 def iou_one(b, bs):
@@ -245,11 +254,10 @@ def time_models(paths, threads, rounds=ROUNDS, runs=RUNS, warmup=WARMUP):
     feeds = []
     for path in paths:
         sess = session(path, threads)
-        i = sess.get_inputs()[0]
-        x = np.random.default_rng(0).random([d if isinstance(d, int) else 1 for d in i.shape], dtype=np.float32)
+        feed = random_feed(sess)
         for _ in range(warmup):
-            sess.run(None, {i.name: x})
-        feeds.append((sess, {i.name: x}))
+            sess.run(None, feed)
+        feeds.append((sess, feed))
     ts = [[] for _ in paths]
     for _ in range(rounds):
         for (sess, feed), t in zip(feeds, ts):
