@@ -4,10 +4,10 @@
 
 use fme::capture::{Frame, FrameSource, PixelFormat, RecordedSource};
 use fme::config::Config;
+use fme::pipeline::Calibration;
+use fme::pipeline::FishPipeline;
+use fme::pipeline::{ActivitySample, Pipeline, PipelineError};
 use fme::sequence::Sequence;
-use fme::service::calibration::Calibration;
-use fme::service::fish_pipeline::FishPipeline;
-use fme::service::pipeline::{ActivitySample, Pipeline, PipelineError};
 use fme::units::Seconds;
 use std::path::Path;
 
@@ -16,7 +16,7 @@ const SEQ: &str = "tests/data/swarm20";
 fn config() -> Config {
     let mut c = Config::default();
     c.source.path = SEQ.into();
-    c.motion.smoothing_s = 2.0;
+    c.motion.smoothing_s = Seconds(2.0);
     c
 }
 
@@ -105,11 +105,17 @@ fn a_bad_frame_is_an_error_and_the_next_one_is_fine() {
 fn time_going_backwards_restarts_tracking_without_error() {
     let mut p = FishPipeline::new(&config(), None).expect("pipeline");
     let frames = frames();
-    run(&mut p, &frames[..30]);
-    assert!(p.health().tracks > 0);
-    // The camera restarts: timestamps start again from zero.
-    let again = run(&mut p, &frames[..10]);
-    assert_eq!(again.len(), 10);
+    let before = run(&mut p, &frames[..30]);
+    assert!(p.health().tracks > 0 && p.tracks().count() > 0);
+    assert!(before.last().is_some_and(|s| s.fish == 0), "uncalibrated: fish tracked, none with a speed");
+    // The camera restarts: timestamps start again from zero. The old tracks must be gone at once
+    // (a track needs two detections to be confirmed again), and tracking resumes.
+    let first = p.process(&frames[0]).expect("frame after the restart").expect("a sample");
+    assert_eq!(first.timestamp, Seconds(0.0));
+    assert_eq!(p.health().tracks, 0, "tracks reset: {:?}", p.health());
+    assert_eq!(p.tracks().count(), 0, "estimator reset");
+    run(&mut p, &frames[1..10]);
+    assert!(p.health().tracks > 0, "tracking resumes after the restart: {:?}", p.health());
     let mut nan = frames[10].clone();
     nan.timestamp = Seconds(f64::NAN);
     assert!(p.process(&nan).is_err(), "a NaN timestamp is refused");

@@ -1,18 +1,9 @@
-//! Where `fme eval` gets its tracked boxes from. The tracker and the detector model plug in by
-//! implementing [`BoxProvider`].
+//! Tracked boxes `fme eval` swaps in for the detector and tracker: ground truth or a track file.
 
 use super::EvalError;
 use crate::geometry::PixelBox;
 use crate::sequence::{Sequence, read_mot};
 use std::path::{Path, PathBuf};
-
-/// A source of tracked boxes, frame by frame (frames are 1-based and requested in order).
-pub trait BoxProvider {
-    /// Short name for reports (`gt`, a file name, `tracker`).
-    fn name(&self) -> String;
-    /// Clears `out` and fills it with `(track id, box)` for `frame`.
-    fn frame_boxes(&mut self, frame: u32, out: &mut Vec<(u32, PixelBox)>) -> Result<(), EvalError>;
-}
 
 /// Boxes indexed by frame, loaded up front.
 #[derive(Debug, Clone)]
@@ -58,16 +49,18 @@ impl IndexedBoxes {
     }
 }
 
-impl BoxProvider for IndexedBoxes {
-    fn name(&self) -> String {
-        self.name.clone()
+impl IndexedBoxes {
+    /// Short name for reports (`gt` or the file).
+    pub fn name(&self) -> &str {
+        &self.name
     }
-    fn frame_boxes(&mut self, frame: u32, out: &mut Vec<(u32, PixelBox)>) -> Result<(), EvalError> {
+
+    /// Clears `out` and fills it with `(track id, box)` for `frame` (1-based).
+    pub fn frame_boxes(&self, frame: u32, out: &mut Vec<(u32, PixelBox)>) {
         out.clear();
         if let Some(b) = self.by_frame.get(frame as usize) {
             out.extend_from_slice(b);
         }
-        Ok(())
     }
 }
 
@@ -78,7 +71,7 @@ pub enum BoxesChoice {
     Gt,
     /// fme's tracker on the sequence's `det/det.txt`, or on noisy detections made from ground truth.
     Tracker,
-    /// The detector (`--det-model`) on the frames, then fme's tracker.
+    /// The pipeline's own detector and tracker.
     Model,
     /// A MOTChallenge track file.
     File(PathBuf),
@@ -93,17 +86,5 @@ impl std::str::FromStr for BoxesChoice {
             "model" => Self::Model,
             other => Self::File(PathBuf::from(other)),
         })
-    }
-}
-
-impl BoxesChoice {
-    /// Builds the provider for `gt` and files; `tracker` and `model` are run by the evaluation
-    /// driver (they need its options), so here they are an error.
-    pub fn provider(&self, seq: &Sequence) -> Result<Box<dyn BoxProvider>, EvalError> {
-        match self {
-            Self::Gt => Ok(Box::new(IndexedBoxes::ground_truth(seq))),
-            Self::File(p) => Ok(Box::new(IndexedBoxes::from_mot_file(p, seq.len())?)),
-            Self::Tracker | Self::Model => Err(EvalError::NotAvailable("--boxes tracker|model")),
-        }
     }
 }
