@@ -167,3 +167,39 @@ async fn daemon_with_the_real_pipeline_feeds_the_plc() {
     assert!(mean.is_finite() && (0.01..2.0).contains(&mean), "activity {mean} m/s");
     assert_eq!(r[9], (mean * 1000.0).round() as u16, "mm/s register");
 }
+
+/// What `fme eval` scores is what `fme run` ships: on a recording replayed with `--fast --no-loop`,
+/// the daemon's per-frame series and the evaluation's are the same on every frame (the pipeline is
+/// deterministic given the frames; `--fast` waits for the pipeline instead of dropping frames).
+#[test]
+fn run_and_eval_give_the_same_series_on_every_frame() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let (run_csv, eval_csv) = (tmp.path().join("run.csv"), tmp.path().join("eval.csv"));
+    let fme = || std::process::Command::new(env!("CARGO_BIN_EXE_fme"));
+    let out = fme()
+        .args(["run", "--source", SEQ, "--fast", "--no-loop", "--set", "output.modbus.mode=off", "--series"])
+        .arg(&run_csv)
+        .output()
+        .expect("run fme run");
+    assert!(out.status.success(), "fme run: {}", String::from_utf8_lossy(&out.stderr));
+    let out = fme()
+        .args(["eval", "--sequence", SEQ, "--boxes", "model", "--depth", "model", "--json", "--series"])
+        .arg(&eval_csv)
+        .output()
+        .expect("run fme eval");
+    assert!(out.status.success(), "fme eval: {}", String::from_utf8_lossy(&out.stderr));
+    let run = std::fs::read_to_string(&run_csv).expect("run series");
+    let eval = std::fs::read_to_string(&eval_csv).expect("eval series");
+    let columns = run.lines().next().expect("header").split(',').count();
+    assert_eq!(columns, 10, "{run}");
+    let head = |l: &str| l.split(',').take(columns).collect::<Vec<_>>().join(",");
+    let (r, e): (Vec<String>, Vec<String>) = (run.lines().map(head).collect(), eval.lines().map(head).collect());
+    assert_eq!(r.len(), 121, "a header and one row per frame");
+    assert_eq!(r.len(), e.len());
+    for (a, b) in r.iter().zip(&e) {
+        assert_eq!(a, b, "fme run and fme eval differ");
+    }
+    // Not a trivial agreement: most frames carry an estimate with fish in it.
+    let with_value = r.iter().skip(1).filter(|l| l.split(',').nth(2).is_some_and(|v| !v.is_empty())).count();
+    assert!(with_value > 80, "{with_value} frames with a value");
+}

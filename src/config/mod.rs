@@ -110,7 +110,9 @@ impl Config {
         let config: Config = serde_path_to_error::deserialize(toml::Deserializer::new(&effective)).map_err(|e| {
             let message = e.inner().message().trim().to_string();
             let mut key = e.path().to_string();
-            if let Some(name) = message.split("unknown field `").nth(1).and_then(|r| r.split('`').next()) {
+            // An unknown key, or a key a section's own check names (`key `x``): name it in full.
+            let named = message.split("unknown field `").nth(1).or_else(|| message.split("key `").nth(1));
+            if let Some(name) = named.and_then(|r| r.split('`').next()) {
                 if key == "." || key.is_empty() {
                     key = name.to_string();
                 } else if !key.ends_with(&format!(".{name}")) && key != name {

@@ -24,9 +24,9 @@ pub struct DetectorConfig {
     /// are only predicted by the tracker). 0 = every frame.
     pub rate_hz: f64,
     /// Minimum detection confidence, 0..1 (Ultralytics `conf`).
-    pub confidence: f32,
+    pub confidence: f64,
     /// Non-maximum-suppression IoU threshold, 0..1 (Ultralytics `iou`).
-    pub nms_iou: f32,
+    pub nms_iou: f64,
     /// ONNX Runtime intra-op threads.
     pub threads: usize,
     /// Let ONNX Runtime's idle worker threads spin between operators (with `threads >= 2`): lower
@@ -118,9 +118,9 @@ pub struct DepthConfig {
     pub sample: DepthSample,
     /// Channel means (R, G, B) in 0..1 units, subtracted after `/255`. ImageNet by default; use
     /// `[0, 0, 0]` for the official MiDaS v2.1 small ONNX, which normalises inside the graph.
-    pub mean: [f32; 3],
+    pub mean: [f64; 3],
     /// Channel standard deviations (R, G, B); `[1, 1, 1]` for the official MiDaS ONNX.
-    pub std: [f32; 3],
+    pub std: [f64; 3],
     /// Half-size, in depth-map pixels, of the window whose median a point sample returns
     /// (0 = the nearest map pixel, at most 3).
     pub sample_radius: u32,
@@ -140,8 +140,8 @@ impl Default for DepthConfig {
             flip: false,
             fit: FitMethod::Robust,
             sample: DepthSample::Visible,
-            mean: Normalize::IMAGENET.mean,
-            std: Normalize::IMAGENET.std,
+            mean: [0.485, 0.456, 0.406],
+            std: [0.229, 0.224, 0.225],
             sample_radius: 1,
             input_size: None,
         }
@@ -170,7 +170,7 @@ impl DepthConfig {
 
     /// The normalisation these settings give.
     pub fn normalize(&self) -> Normalize {
-        Normalize { mean: self.mean, std: self.std }
+        Normalize { mean: self.mean.map(|v| v as f32), std: self.std.map(|v| v as f32) }
     }
 
     /// The ONNX Runtime session options of this network.
@@ -191,7 +191,7 @@ fn threads(key: &'static str, n: usize) -> Result<(), InferError> {
     if (1..=64).contains(&n) { Ok(()) } else { Err(InferError::Config { key, reason: format!("{n} must be 1..=64") }) }
 }
 
-fn unit(key: &'static str, v: f32) -> Result<(), InferError> {
+fn unit(key: &'static str, v: f64) -> Result<(), InferError> {
     if (0.0..=1.0).contains(&v) {
         Ok(())
     } else {
