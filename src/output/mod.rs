@@ -8,5 +8,6 @@ pub mod feeding;
 pub mod log_throttle;
 pub mod modbus;
 pub mod registers;
+pub mod roles;
 pub mod serial_line;
 pub mod tcp_conns;

@@ -18,9 +18,9 @@ pub mod pipeline;
 pub mod publish;
 
 use crate::capture::{Backoff, CaptureError, FrameQueue, FrameSource};
-use crate::config::{Config, ModbusMode};
+use crate::config::Config;
 use crate::output::bank::RegisterBank;
-use crate::output::modbus::{self, ClientSettings, ClientTarget, ModbusError};
+use crate::output::roles::RoleError;
 use health::Shared;
 use pipeline::Pipeline;
 use publish::Publisher;
@@ -32,9 +32,9 @@ use tracing::Level;
 /// Errors starting the daemon (everything after start-up is logged and retried instead).
 #[derive(Debug, thiserror::Error)]
 pub enum ServiceError {
-    /// A Modbus role could not start.
+    /// A Modbus role (or the serial line) could not start.
     #[error(transparent)]
-    Modbus(#[from] ModbusError),
+    Roles(#[from] RoleError),
     /// The frame source could not be opened.
     #[error("source: {0}")]
     Capture(#[from] CaptureError),
@@ -334,39 +334,6 @@ fn pipeline_loop(mut c: PipelineCtx) {
     let _ = c.finished.send(true);
 }
 
-fn serial_line_loop(device: String, baud: u32, rx: std::sync::mpsc::Receiver<String>, shared: Arc<Shared>) {
-    let mut port: Option<Box<dyn serialport::SerialPort>> = None;
-    let mut backoff = Backoff::new(Duration::from_millis(500), Duration::from_secs(30));
-    let mut retry_at = Instant::now();
-    loop {
-        let line = match rx.recv_timeout(Duration::from_millis(200)) {
-            Ok(l) => l,
-            Err(std::sync::mpsc::RecvTimeoutError::Timeout) if shared.stopping() => return,
-            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => continue,
-            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return,
-        };
-        if port.is_none() && Instant::now() >= retry_at {
-            match serialport::new(&device, baud).timeout(Duration::from_millis(200)).open() {
-                Ok(p) => {
-                    backoff.reset();
-                    port = Some(p);
-                }
-                Err(e) => {
-                    let d = backoff.next_delay();
-                    retry_at = Instant::now() + d;
-                    shared.log(Level::WARN, format!("serial line {device}: {e}; retry in {} ms", d.as_millis()));
-                }
-            }
-        }
-        if let Some(p) = port.as_mut()
-            && let Err(e) = p.write_all(line.as_bytes()).and_then(|()| p.flush())
-        {
-            shared.log(Level::WARN, format!("serial line {device}: write failed: {e}"));
-            port = None;
-        }
-    }
-}
-
 impl Daemon {
     /// Starts every part of the daemon. Must be called inside a tokio runtime. Start-up errors (bind,
     /// serial open of an RTU server) are returned; later failures are logged and retried.
@@ -386,75 +353,11 @@ impl Daemon {
         let _ = publisher.lock().unwrap_or_else(|p| p.into_inner()).publish(&shared, Instant::now(), false);
 
         let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
-        let mut server_stops = Vec::new();
-        let mut server_tasks = Vec::new();
-        let mut client_task = None;
-        let m = &cfg.output.modbus;
-        let mut modbus_addr = None;
-        match m.mode {
-            ModbusMode::Off => {}
-            ModbusMode::TcpServer => {
-                let (listener, addr) = modbus::bind_tcp(&m.listen).await?;
-                modbus_addr = Some(addr);
-                let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-                server_stops.push(tx);
-                server_tasks.push(tokio::spawn(modbus::serve_tcp(
-                    listener,
-                    bank.clone(),
-                    m.tcp_limits(),
-                    async move {
-                        let _ = rx.await;
-                    },
-                )));
-                shared.log(Level::INFO, format!("modbus tcp server on {addr}"));
-            }
-            ModbusMode::RtuServer => {
-                // A missing RS-485 adapter is retried with backoff, not fatal.
-                server_tasks.push(tokio::spawn(modbus::run_rtu_server(m.clone(), bank.clone(), stop_rx.clone())));
-                shared.log(Level::INFO, format!("modbus rtu server on {} unit {}", m.serial_device, m.unit_id));
-            }
-            ModbusMode::TcpClient | ModbusMode::RtuClient => {
-                let target = if m.mode == ModbusMode::TcpClient {
-                    ClientTarget::Tcp(m.peer.clone()) // resolved at each connect: DNS changes are picked up
-                } else {
-                    ClientTarget::Rtu(m.clone())
-                };
-                let settings = ClientSettings {
-                    target,
-                    unit_id: m.unit_id,
-                    base_address: m.base_address,
-                    timeout: Duration::from_millis(m.timeout_ms),
-                    backoff: Backoff::new(
-                        Duration::from_millis(m.reconnect_min_ms),
-                        Duration::from_millis(m.reconnect_max_ms),
-                    ),
-                };
-                client_task = Some(tokio::spawn(modbus::run_client(settings, bank.clone(), stop_rx.clone())));
-                shared.log(
-                    Level::INFO,
-                    format!(
-                        "modbus client ({:?}) to {}",
-                        m.mode,
-                        if m.mode == ModbusMode::TcpClient { &m.peer } else { &m.serial_device }
-                    ),
-                );
-            }
-        }
-
-        let mut other_threads = Vec::new();
-        let serial_tx = if cfg.output.serial.enabled {
-            let (tx, rx) = std::sync::mpsc::sync_channel::<String>(4);
-            let (dev, baud, sh) = (cfg.output.serial.device.clone(), cfg.output.serial.baud, shared.clone());
-            other_threads.push(
-                std::thread::Builder::new()
-                    .name("fme-serial-line".into())
-                    .spawn(move || serial_line_loop(dev, baud, rx, sh))
-                    .map_err(|source| ServiceError::Spawn { what: "serial line", source })?,
-            );
-            Some(tx)
-        } else {
-            None
-        };
+        let roles = crate::output::roles::spawn(&cfg, &bank, &shared, stop_rx).await?;
+        let modbus_addr = roles.modbus_addr;
+        let (server_stops, server_tasks, client_task) = (roles.server_stops, roles.server_tasks, roles.client_task);
+        let serial_tx = roles.serial_tx;
+        let mut other_threads: Vec<_> = roles.serial_thread.into_iter().collect();
         if cfg.console.enabled {
             let (dev, baud, echo, sh) =
                 (cfg.console.device.clone(), cfg.console.baud, cfg.console.echo, shared.clone());
