@@ -124,7 +124,7 @@ async fn read_ok(ctx: &mut tokio_modbus::client::Context) -> bool {
 #[tokio::test]
 async fn tcp_server_closes_a_connection_idle_past_the_timeout_and_keeps_a_polling_one() {
     let bank = sample_bank();
-    let limits = TcpLimits { max_connections: 8, idle_timeout: Some(Duration::from_secs(1)) };
+    let limits = TcpLimits { max_connections: 8, idle_timeout: Some(Duration::from_secs(1)), ..TcpLimits::default() };
     let (addr, _stop) = start_tcp_with(bank.clone(), limits).await;
     let mut polling = tcp::connect_slave(addr, Slave(1)).await.expect("connect polling");
     let mut idle = tcp::connect_slave(addr, Slave(1)).await.expect("connect idle");
@@ -147,7 +147,8 @@ async fn an_evicted_stream_keeps_failing_when_polled_again() {
     use tokio::io::AsyncReadExt as _;
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
     let addr = listener.local_addr().expect("addr");
-    let conns = Connections::new(TcpLimits { max_connections: 1, idle_timeout: None }, sample_bank());
+    let conns =
+        Connections::new(TcpLimits { max_connections: 1, idle_timeout: None, ..TcpLimits::default() }, sample_bank());
     let _ca = tokio::net::TcpStream::connect(addr).await.expect("connect a");
     let (sa, peer_a) = listener.accept().await.expect("accept a");
     let mut a = conns.admit(sa, peer_a);
@@ -166,7 +167,7 @@ async fn an_evicted_stream_keeps_failing_when_polled_again() {
 #[tokio::test]
 async fn tcp_server_at_its_connection_limit_closes_the_least_recently_active_for_a_new_one() {
     let bank = sample_bank();
-    let limits = TcpLimits { max_connections: 2, idle_timeout: None };
+    let limits = TcpLimits { max_connections: 2, idle_timeout: None, ..TcpLimits::default() };
     let (addr, _stop) = start_tcp_with(bank.clone(), limits).await;
     let mut a = tcp::connect_slave(addr, Slave(1)).await.expect("connect a");
     let mut b = tcp::connect_slave(addr, Slave(1)).await.expect("connect b");

@@ -189,6 +189,15 @@ impl Config {
         if m.max_connections == 0 || m.max_connections > 64 {
             return err("output.modbus.max_connections", format!("must be 1..=64, got {}", m.max_connections));
         }
+        if m.max_connections_per_peer == 0 || m.max_connections_per_peer > 64 {
+            return err(
+                "output.modbus.max_connections_per_peer",
+                format!("must be 1..=64 (at most max_connections apply), got {}", m.max_connections_per_peer),
+            );
+        }
+        if let Err(e) = crate::output::allow::AllowList::parse(&m.allow) {
+            return err("output.modbus.allow", e);
+        }
         if self.output.serial.enabled && self.output.serial.baud == 0 {
             return err("output.serial.baud", "must be > 0");
         }
@@ -224,9 +233,13 @@ pub fn is_host_port(s: &str) -> bool {
     }
     match s.rsplit_once(':') {
         Some((host, port)) => {
+            // A host of digits and dots is meant as an IPv4 address and must be one
+            // (`256.256.256.256` is not a name to look up later).
+            let dotted = host.chars().all(|c| c.is_ascii_digit() || c == '.');
             port.parse::<u16>().is_ok()
                 && !host.is_empty()
                 && host.chars().all(|c| c.is_ascii_alphanumeric() || c == '.' || c == '-')
+                && (!dotted || host.parse::<std::net::Ipv4Addr>().is_ok())
         }
         None => false,
     }
@@ -239,6 +252,7 @@ fn locate_span(text: &str, pos: usize, message: &str) -> (usize, String) {
     let line_no = text[..pos].matches('\n').count() + 1;
     let mut section = String::new();
     let mut key = String::new();
+    let mut on_header = false;
     for (i, line) in text.lines().enumerate() {
         if i + 1 > line_no {
             break;
@@ -247,13 +261,16 @@ fn locate_span(text: &str, pos: usize, message: &str) -> (usize, String) {
         if let Some(h) = header_of(t) {
             section = h;
             key.clear();
+            on_header = i + 1 == line_no;
         } else if i + 1 == line_no
             && let Some((k, _)) = t.split_once('=')
         {
             key = k.trim().trim_matches('"').to_string();
         }
     }
-    if let Some(rest) = message.split("unknown field `").nth(1)
+    // An unknown section (`[sourcee]`): the header itself is the key, not `sourcee.sourcee`.
+    if !on_header
+        && let Some(rest) = message.split("unknown field `").nth(1)
         && let Some(name) = rest.split('`').next()
     {
         key = name.to_string();
@@ -323,6 +340,28 @@ mod tests {
     }
 
     #[test]
+    fn unknown_section_named_once() {
+        let e = parse("[source]\nwidth = 640\n[sourcee]\nwidth = 1\n").err();
+        match e {
+            Some(ConfigError::Invalid { line, key, .. }) => assert_eq!((line, key.as_str()), (3, "sourcee")),
+            other => panic!("expected Invalid, got {other:?}"),
+        }
+        let e = parse("[output.modbuss]\nmode = \"off\"\n").err();
+        assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.modbuss"), "{e:?}");
+    }
+
+    #[test]
+    fn modbus_allow_and_per_peer_limit_checked() {
+        let e = parse("[output.modbus]\nallow = [\"192.168.1.0/24\", \"plc.local\"]\n").err();
+        assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.modbus.allow"), "{e:?}");
+        let e = parse("[output.modbus]\nmax_connections_per_peer = 0\n").err();
+        assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.modbus.max_connections_per_peer"), "{e:?}");
+        let c = parse("[output.modbus]\nallow = [\"10.1.2.0/24\"]\n").expect("valid");
+        let l = c.output.modbus.tcp_limits();
+        assert!(l.allow.permits("10.1.2.9".parse().expect("ip")) && !l.allow.permits("10.1.3.9".parse().expect("ip")));
+    }
+
+    #[test]
     fn wrong_type_named_with_line() {
         let e = parse("[detector]\n\nrate_hz = \"fast\"\n").err();
         match e {
@@ -380,7 +419,9 @@ mod tests {
         for ok in ["0.0.0.0:502", "[::1]:5020", "localhost:5020", "plc-1.farm.local:502"] {
             assert!(is_host_port(ok), "{ok}");
         }
-        for bad in ["localhost", ":502", "plc:99999", "plc 1:502", ""] {
+        for bad in
+            ["localhost", ":502", "plc:99999", "plc 1:502", "", "256.256.256.256:502", "10.0.0:502", "1.2.3.4.5:502"]
+        {
             assert!(!is_host_port(bad), "{bad}");
         }
     }

@@ -261,7 +261,7 @@ impl Session {
                 let q = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.0} ms"));
                 let _ = write!(
                     body,
-                    "frames-captured {}\nframes-processed {}\nframes-dropped {}\ncamera-fps {:.1}\ncapture-errors {}\nreconnects {}\npipeline-errors {}\nupdates {}\nmodbus-requests {}\nmodbus-exceptions {}\nmodbus-tcp-open {}\nmodbus-tcp-idle-closed {}\nmodbus-tcp-evicted {}\nmodbus-tcp-accept-errors {}\nplc-writes {}\nplc-failures {}\nlatency-p50 {}\nlatency-p99 {}",
+                    "frames-captured {}\nframes-processed {}\nframes-dropped {}\ncamera-fps {:.1}\ncapture-errors {}\nreconnects {}\npipeline-errors {}\nupdates {}\nmodbus-requests {}\nmodbus-exceptions {}\nmodbus-tcp-open {}\nmodbus-tcp-idle-closed {}\nmodbus-tcp-evicted {}\nmodbus-tcp-accept-errors {}\nmodbus-tcp-refused {}\nmodbus-tcp-bad-frames {}\nmodbus-task-panics {}\nplc-writes {}\nplc-failures {}\nlatency-p50 {}\nlatency-p99 {}",
                     h.frames_captured,
                     h.frames_processed,
                     h.frames_dropped,
@@ -276,6 +276,9 @@ impl Session {
                     m.tcp_idle_closed,
                     m.tcp_evicted,
                     m.tcp_accept_errors,
+                    m.tcp_refused,
+                    m.tcp_bad_frames,
+                    m.task_panics,
                     m.client_writes,
                     m.client_failures,
                     q(h.latency.quantile_ms(0.5)),

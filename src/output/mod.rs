@@ -3,10 +3,12 @@
 //! The register map ([`registers`]) and the feeding rule ([`feeding`]) are pure and tested without
 //! I/O; [`modbus`] and the serial line are the I/O edges around the shared [`bank::RegisterBank`].
 
+pub mod allow;
 pub mod bank;
 pub mod feeding;
 pub mod log_throttle;
 pub mod modbus;
+pub mod modbus_guard;
 pub mod registers;
 pub mod roles;
 pub mod serial_line;

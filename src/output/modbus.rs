@@ -1,16 +1,20 @@
 //! Modbus in all four roles (tokio-modbus): TCP server (default; the PLC polls), TCP client (one
 //! FC16 write of the block per update), RTU server and RTU client over a serial line.
 //!
-//! The TCP server limits its connections and closes idle ones ([`super::tcp_conns`]), and a failed
-//! accept pauses it instead of stopping it.
+//! The TCP server frames and decodes requests itself, checking them first
+//! ([`super::modbus_guard`]: tokio-modbus 0.17 panics on some malformed FC15 frames), limits and
+//! filters its connections and closes idle ones ([`super::tcp_conns`]), and a failed accept pauses
+//! it instead of stopping it.
 //!
 //! Every client call has a timeout (tokio-modbus has none of its own, issue #113); a lost PLC is
 //! reconnected with exponential backoff (tokio-modbus does not reconnect, #219/#309); the pipeline
 //! only ever publishes into the [`RegisterBank`] and never waits on the PLC.
 
 use super::bank::RegisterBank;
+use super::log_throttle::LogThrottle;
+use super::modbus_guard::{FrameError, MAX_PDU, answer, read_frame};
 use super::registers::{BLOCK_LEN, HR_WRITABLE_LEN, HR_WRITABLE_START};
-use super::tcp_conns::{Connections, TcpLimits};
+use super::tcp_conns::{Connections, GuardedStream, TcpLimits};
 use crate::capture::Backoff;
 use crate::config::{ModbusConfig, Parity};
 use std::future::Future;
@@ -24,12 +28,12 @@ use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
 #[derive(Debug, thiserror::Error)]
 pub enum ModbusError {
     /// Binding the TCP listener failed.
-    #[error("modbus tcp server: cannot listen on {addr}: {source}")]
+    #[error("modbus tcp server: cannot listen on {addr} (output.modbus.listen): {error}")]
     Bind {
         /// The address.
         addr: String,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message, not a separate cause: printed once).
+        error: std::io::Error,
     },
     /// Opening the serial device failed.
     #[error("modbus rtu: cannot open {device}: {message}")]
@@ -136,18 +140,21 @@ impl tokio_modbus::server::Service for RegisterService {
 pub async fn bind_tcp(listen: &str) -> Result<(tokio::net::TcpListener, SocketAddr), ModbusError> {
     let l = tokio::net::TcpListener::bind(listen)
         .await
-        .map_err(|source| ModbusError::Bind { addr: listen.to_string(), source })?;
-    let addr = l.local_addr().map_err(|source| ModbusError::Bind { addr: listen.to_string(), source })?;
+        .map_err(|error| ModbusError::Bind { addr: listen.to_string(), error })?;
+    let addr = l.local_addr().map_err(|error| ModbusError::Bind { addr: listen.to_string(), error })?;
     Ok((l, addr))
 }
 
-/// Serves Modbus TCP on `listener` until `shutdown` resolves, within `limits` (connection limit,
-/// idle timeout: [`super::tcp_conns`]).
+/// Serves Modbus TCP on `listener` until `shutdown` resolves, within `limits` (allow list,
+/// connection limits, idle timeout: [`super::tcp_conns`]).
+///
+/// Framing and request decoding are this crate's own ([`super::modbus_guard`]): malformed
+/// requests get exception 03 and never reach tokio-modbus's decoder (upstream issue 298). Each
+/// connection is its own task; a panic in one is counted and logged at most once per 10 s.
 ///
 /// A failed accept (the process out of file descriptors, say) never stops the server: it is
-/// counted, logged, and accepting resumes after a pause (backoff 0.1 s doubling to 5 s).
-/// tokio-modbus ends its accept loop on the first such error and closes the connections it serves,
-/// so those PLCs reconnect once it resumes.
+/// counted, logged, and accepting resumes after a pause (backoff 0.1 s doubling to 5 s); the
+/// connections already open are served meanwhile.
 pub async fn serve_tcp(
     listener: tokio::net::TcpListener,
     bank: Arc<RegisterBank>,
@@ -155,36 +162,111 @@ pub async fn serve_tcp(
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) {
     let conns = Connections::new(limits, bank.clone());
-    let server = tokio_modbus::server::tcp::Server::new(listener);
-    let service_bank = bank.clone();
-    let on_connected = move |stream: tokio::net::TcpStream, addr: SocketAddr| {
-        let transport = conns.admit(stream, addr);
-        let service = RegisterService::new(service_bank.clone(), None);
-        std::future::ready(Ok(Some((service, transport))))
-    };
-    let on_err = |e: std::io::Error| tracing::debug!("modbus tcp connection ended: {e}");
+    let mut tasks = tokio::task::JoinSet::new();
+    let mut panic_log = LogThrottle::new(TASK_LOG_PERIOD);
+    let mut refused_log = LogThrottle::new(TASK_LOG_PERIOD);
     let mut shutdown = std::pin::pin!(shutdown);
     let mut backoff = Backoff::new(Duration::from_millis(100), Duration::from_secs(5));
     loop {
-        let started = tokio::time::Instant::now();
         tokio::select! {
-            res = server.serve(&on_connected, on_err) => {
-                let e = match res {
-                    Ok(()) => std::io::Error::other("accept loop ended"),
-                    Err(e) => e,
-                };
-                if started.elapsed() >= Duration::from_secs(5) {
-                    backoff.reset();
-                }
-                let pause = backoff.next_delay();
-                bank.note_tcp_accept_error();
-                tracing::warn!("modbus tcp server: accept failed: {e}; accepting again in {:.1} s", pause.as_secs_f64());
-                tokio::select! {
-                    _ = tokio::time::sleep(pause) => {},
-                    () = &mut shutdown => return,
+            () = &mut shutdown => return, // dropping the JoinSet aborts the connection tasks
+            Some(done) = tasks.join_next(), if !tasks.is_empty() => {
+                if let Err(e) = done
+                    && e.is_panic()
+                {
+                    note_panic(&bank, &mut panic_log, "modbus tcp connection", e.into_panic());
                 }
             }
-            () = &mut shutdown => return,
+            accepted = listener.accept() => match accepted {
+                Ok((stream, peer)) => {
+                    backoff.reset();
+                    if !conns.permits(peer) {
+                        bank.note_tcp_refused();
+                        if let Some(n) = refused_log.allow(tokio::time::Instant::now()) {
+                            tracing::warn!("modbus tcp: connection from {peer} refused (not in output.modbus.allow; {n} more since the last message)");
+                        }
+                        drop(stream);
+                        continue;
+                    }
+                    let _ = stream.set_nodelay(true);
+                    tasks.spawn(serve_connection(conns.admit(stream, peer), bank.clone()));
+                }
+                Err(e) => {
+                    let pause = backoff.next_delay();
+                    bank.note_tcp_accept_error();
+                    tracing::warn!("modbus tcp server: accept failed: {e}; accepting again in {:.1} s", pause.as_secs_f64());
+                    tokio::select! {
+                        _ = tokio::time::sleep(pause) => {},
+                        () = &mut shutdown => return,
+                    }
+                }
+            },
+        }
+    }
+}
+
+/// At most one panic / refusal message per this period (the bank counts each).
+const TASK_LOG_PERIOD: Duration = Duration::from_secs(10);
+
+/// A write of one answer taking longer than this (a peer that does not read) ends the connection.
+const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
+
+fn note_panic(bank: &RegisterBank, log: &mut LogThrottle, what: &str, p: Box<dyn std::any::Any + Send>) {
+    bank.note_task_panic();
+    if let Some(n) = log.allow(tokio::time::Instant::now()) {
+        let msg = p
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_string())
+            .or_else(|| p.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "(no message)".into());
+        tracing::error!(
+            "{what} task panicked: {msg} ({n} more since the last message; {} in all)",
+            bank.counters().task_panics
+        );
+    }
+}
+
+/// Serves one TCP connection: frame, decode (checked), answer, until the peer closes, the idle
+/// timeout, eviction, or a frame that cannot be framed.
+async fn serve_connection(mut stream: GuardedStream, bank: Arc<RegisterBank>) {
+    use tokio::io::AsyncWriteExt as _;
+    let service = RegisterService::new(bank.clone(), None);
+    let mut buf = Vec::with_capacity(MAX_PDU);
+    let mut out = Vec::with_capacity(MAX_PDU + 7);
+    loop {
+        let frame = match read_frame(&mut stream, std::mem::take(&mut buf)).await {
+            Ok(f) => f,
+            Err(FrameError::Header { protocol, length }) => {
+                bank.note_tcp_bad_frame();
+                tracing::debug!(
+                    "modbus tcp {}: bad MBAP header (protocol {protocol}, length {length}); closing",
+                    stream.peer()
+                );
+                return;
+            }
+            Err(FrameError::Io(e)) => {
+                tracing::debug!("modbus tcp connection ended: {e}");
+                return;
+            }
+        };
+        let exception = answer(&frame, |req| service.handle(req), &mut out);
+        bank.note_request(exception);
+        stream.note_request(!exception);
+        buf = frame.pdu;
+        match tokio::time::timeout(WRITE_TIMEOUT, stream.write_all(&out)).await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => {
+                tracing::debug!("modbus tcp connection ended: {e}");
+                return;
+            }
+            Err(_) => {
+                tracing::debug!(
+                    "modbus tcp {}: answer not read for {} s; closing",
+                    stream.peer(),
+                    WRITE_TIMEOUT.as_secs()
+                );
+                return;
+            }
         }
     }
 }
@@ -231,6 +313,7 @@ pub async fn run_rtu_server(
 ) {
     let mut backoff =
         Backoff::new(Duration::from_millis(cfg.reconnect_min_ms), Duration::from_millis(cfg.reconnect_max_ms));
+    let mut panic_log = LogThrottle::new(TASK_LOG_PERIOD);
     while !*shutdown.borrow() {
         match open_serial(&cfg) {
             Ok(port) => {
@@ -248,16 +331,19 @@ pub async fn run_rtu_server(
                     stop.await;
                     let _ = tx.send(());
                 });
-                let res = server
-                    .serve_until(svc, async move {
-                        let _ = orx.await;
-                    })
-                    .await;
+                // Its own task: tokio-modbus decodes RTU requests itself, and a panic there (see
+                // `modbus_guard`) must restart the server, not end the role.
+                let serving = tokio::spawn(server.serve_until(svc, async move {
+                    let _ = orx.await;
+                }));
+                let res = serving.await;
                 relay.abort();
                 match res {
-                    Ok(tokio_modbus::server::Terminated::Aborted) => return,
-                    Ok(_) => tracing::warn!("modbus rtu {}: port closed", cfg.serial_device),
-                    Err(e) => tracing::warn!("modbus rtu {}: {e}", cfg.serial_device),
+                    Ok(Ok(tokio_modbus::server::Terminated::Aborted)) => return,
+                    Ok(Ok(_)) => tracing::warn!("modbus rtu {}: port closed", cfg.serial_device),
+                    Ok(Err(e)) => tracing::warn!("modbus rtu {}: {e}", cfg.serial_device),
+                    Err(e) if e.is_panic() => note_panic(&bank, &mut panic_log, "modbus rtu server", e.into_panic()),
+                    Err(_) => return,
                 }
             }
             Err(e) => tracing::warn!("{e}"),
