@@ -103,6 +103,11 @@ impl Config {
         if s.reconnect_min_ms == 0 || s.reconnect_min_ms > s.reconnect_max_ms {
             return err("source.reconnect_min_ms", "must be > 0 and <= source.reconnect_max_ms");
         }
+        for (key, model) in [("detector.model", &self.detector.model), ("depth.model", &self.depth.model)] {
+            if model.as_os_str().is_empty() {
+                return err(key, "must name an ONNX model file");
+            }
+        }
         positive("detector.rate_hz", self.detector.rate_hz)?;
         unit_interval("detector.confidence", self.detector.confidence)?;
         unit_interval("detector.nms_iou", self.detector.nms_iou)?;

@@ -16,6 +16,7 @@ pub mod fish_pipeline;
 pub mod health;
 pub mod pipeline;
 pub mod publish;
+pub mod signals;
 
 use crate::capture::{Backoff, CaptureError, FrameQueue, FrameSource};
 use crate::config::Config;
@@ -42,12 +43,12 @@ pub enum ServiceError {
     #[error("pipeline: {0}")]
     Pipeline(String),
     /// A thread could not be spawned.
-    #[error("cannot spawn {what}: {source}")]
+    #[error("cannot spawn {what}: {error}")]
     Spawn {
         /// Which thread.
         what: &'static str,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message, not a separate cause: printed once).
+        error: std::io::Error,
     },
 }
 
@@ -66,21 +67,29 @@ pub fn build_pipeline(cfg: &Config) -> Result<Box<dyn Pipeline>, ServiceError> {
     Ok(Box::new(p))
 }
 
-/// The calibration: `camera.calibration` when set, else a recorded source's own `meta.json`.
-fn calibration_for(cfg: &Config) -> Result<Option<calibration::Calibration>, ServiceError> {
+/// The calibration: `camera.calibration` when set, else a recorded source's own `meta.json`. A
+/// calibration that cannot give a metric fit (fewer than two reference objects) is an error: the
+/// box would track fish forever and never report a speed.
+pub fn calibration_for(cfg: &Config) -> Result<Option<calibration::Calibration>, ServiceError> {
     let configured = &cfg.camera.calibration;
-    if !configured.as_os_str().is_empty() {
-        return calibration::Calibration::load(configured)
-            .map(Some)
-            .map_err(|e| ServiceError::Pipeline(format!("camera.calibration: {e}")));
+    let (path, key) = if !configured.as_os_str().is_empty() {
+        (configured.clone(), "camera.calibration")
+    } else {
+        let meta = cfg.source.path.join("meta.json");
+        if cfg.source.path.starts_with("/dev") || !meta.is_file() {
+            return Ok(None);
+        }
+        (meta, "the recording's calibration")
+    };
+    let c = calibration::Calibration::load(&path).map_err(|e| ServiceError::Pipeline(format!("{key}: {e}")))?;
+    if c.references.len() < 2 {
+        return Err(ServiceError::Pipeline(format!(
+            "{key}: {}: reference_objects: {} reference object(s); the metric depth fit needs at least 2",
+            path.display(),
+            c.references.len()
+        )));
     }
-    let meta = cfg.source.path.join("meta.json");
-    if cfg.source.path.starts_with("/dev") || !meta.is_file() {
-        return Ok(None);
-    }
-    calibration::Calibration::load(&meta)
-        .map(Some)
-        .map_err(|e| ServiceError::Pipeline(format!("the recording's calibration: {e}")))
+    Ok(Some(c))
 }
 
 /// Run-time options not in the config file.
@@ -132,10 +141,16 @@ fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
 }
 
 /// Runs the capture loop, restarting it (after the reconnect backoff) if a source panics.
-fn capture_thread(mut source: Box<dyn FrameSource>, queue: Arc<FrameQueue>, shared: Arc<Shared>, backoff: Backoff) {
+fn capture_thread(
+    mut source: Box<dyn FrameSource>,
+    queue: Arc<FrameQueue>,
+    shared: Arc<Shared>,
+    backoff: Backoff,
+    size: SizeLimit,
+) {
     loop {
         let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            capture_loop(&mut source, &queue, &shared, backoff);
+            capture_loop(&mut source, &queue, &shared, backoff, size);
         }));
         match run {
             Ok(()) => return,
@@ -158,14 +173,38 @@ fn capture_thread(mut source: Box<dyn FrameSource>, queue: Arc<FrameQueue>, shar
     }
 }
 
-fn capture_loop(source: &mut Box<dyn FrameSource>, queue: &FrameQueue, shared: &Shared, mut backoff: Backoff) {
+/// `source.max_pixels` and the configured size ([`crate::capture::Frame::check_size`]).
+#[derive(Debug, Clone, Copy)]
+struct SizeLimit {
+    max_pixels: u64,
+    configured: (u32, u32),
+}
+
+fn capture_loop(
+    source: &mut Box<dyn FrameSource>,
+    queue: &FrameQueue,
+    shared: &Shared,
+    mut backoff: Backoff,
+    size: SizeLimit,
+) {
     let mut window_start = Instant::now();
     let mut window_frames = 0u32;
+    let mut oversized = 0u64;
     let paced = source.paced();
     while !shared.stopping() {
         match source.next_frame(queue.take_buffer()) {
             Ok(frame) => {
                 backoff.reset();
+                // Checked from the header before anything decodes it: a bad frame, not a decode.
+                if let Err(e) = frame.check_size(size.max_pixels, size.configured) {
+                    oversized += 1;
+                    shared.with_health(|h| h.capture_errors += 1);
+                    if oversized == 1 || oversized.is_multiple_of(100) {
+                        shared.log(Level::WARN, format!("bad frame #{oversized} dropped: {e}"));
+                    }
+                    queue.recycle(frame.data);
+                    continue;
+                }
                 let now = frame.arrived;
                 if paced {
                     if let Some(old) = queue.push(frame) {
@@ -365,7 +404,7 @@ impl Daemon {
                 std::thread::Builder::new()
                     .name("fme-console".into())
                     .spawn(move || crate::console::run_on_device(&dev, baud, echo, &sh))
-                    .map_err(|source| ServiceError::Spawn { what: "console", source })?,
+                    .map_err(|error| ServiceError::Spawn { what: "console", error })?,
             );
         }
 
@@ -375,11 +414,12 @@ impl Daemon {
             Duration::from_millis(cfg.source.reconnect_max_ms),
         );
         let (q, sh) = (queue.clone(), shared.clone());
+        let size = SizeLimit { max_pixels: cfg.source.max_pixels, configured: (cfg.source.width, cfg.source.height) };
         other_threads.push(
             std::thread::Builder::new()
                 .name("fme-capture".into())
-                .spawn(move || capture_thread(source, q, sh, backoff))
-                .map_err(|source| ServiceError::Spawn { what: "capture", source })?,
+                .spawn(move || capture_thread(source, q, sh, backoff, size))
+                .map_err(|error| ServiceError::Spawn { what: "capture", error })?,
         );
         let watchdog = if cfg.service.systemd_notify { sd_notify::watchdog_enabled() } else { None };
         let (finished_tx, finished) = tokio::sync::watch::channel(false);
@@ -398,7 +438,7 @@ impl Daemon {
             std::thread::Builder::new()
                 .name("fme-pipeline".into())
                 .spawn(move || pipeline_loop(ctx))
-                .map_err(|source| ServiceError::Spawn { what: "pipeline", source })?,
+                .map_err(|error| ServiceError::Spawn { what: "pipeline", error })?,
         );
 
         // Keepalive: with no samples (camera down, pipeline failing) the registers still update, so
@@ -459,6 +499,21 @@ impl Daemon {
     /// Shared state (health, registers, logs).
     pub fn shared(&self) -> &Arc<Shared> {
         &self.shared
+    }
+
+    /// SIGHUP: checks the calibration file again and says what it found (journal and console
+    /// `log`). The running pipeline keeps its calibration: applying a changed one needs a restart.
+    pub fn on_hangup(&self) {
+        let what = match calibration_for(&self.cfg) {
+            Ok(Some(c)) => format!(
+                "{} reads OK ({} reference objects); restart fme to apply a changed calibration",
+                c.path.display(),
+                c.references.len()
+            ),
+            Ok(None) => "no calibration configured (camera.calibration)".to_string(),
+            Err(e) => format!("{e}; the running calibration is kept"),
+        };
+        self.shared.log(Level::WARN, format!("SIGHUP: not stopping; calibration check: {what}"));
     }
 
     /// The bound Modbus TCP server address (useful with port 0).
