@@ -1,8 +1,8 @@
 //! Modbus in all four roles (tokio-modbus): TCP server (default; the PLC polls), TCP client (one
 //! FC16 write of the block per update), RTU server and RTU client over a serial line.
 //!
-//! The TCP server frames and decodes requests itself, checking them first
-//! ([`super::modbus_guard`]: tokio-modbus 0.17 panics on some malformed FC15 frames), limits and
+//! The TCP and RTU servers frame and decode requests themselves, checking them first
+//! ([`super::modbus_guard`]: tokio-modbus 0.17 panics on some malformed FC15 frames); the TCP server limits and
 //! filters its connections and closes idle ones ([`super::tcp_conns`]), and a failed accept pauses
 //! it instead of stopping it.
 //!
@@ -12,7 +12,7 @@
 
 use super::bank::RegisterBank;
 use super::log_throttle::LogThrottle;
-use super::modbus_guard::{FrameError, MAX_PDU, answer, read_frame};
+use super::modbus_guard::{FrameError, MAX_PDU, RtuSplit, answer, answer_pdu, crc_ok, crc16, read_frame, rtu_split};
 use super::registers::{BLOCK_LEN, HR_WRITABLE_LEN, HR_WRITABLE_START};
 use super::tcp_conns::{Connections, GuardedStream, TcpLimits};
 use crate::capture::Backoff;
@@ -290,22 +290,113 @@ pub fn open_serial(cfg: &ModbusConfig) -> Result<tokio_serial::SerialStream, Mod
         .map_err(|e| ModbusError::Serial { device: cfg.serial_device.clone(), message: e.to_string() })
 }
 
-/// Serves Modbus RTU on an opened serial stream (answers only `unit_id`) until `shutdown`.
+/// Serves Modbus RTU on an opened serial stream (answers only `unit_id`; broadcasts to unit 0 are
+/// carried out without an answer) until `shutdown`.
 pub async fn serve_rtu(
-    serial: tokio_serial::SerialStream,
+    mut serial: tokio_serial::SerialStream,
     bank: Arc<RegisterBank>,
     unit_id: u8,
-    shutdown: impl Future<Output = ()> + Send + Sync + 'static,
+    shutdown: impl Future<Output = ()> + Send + 'static,
 ) {
-    let server = tokio_modbus::server::rtu::Server::new(serial);
-    let svc = RegisterService::new(bank, Some(unit_id));
-    if let Err(e) = server.serve_until(svc, shutdown).await {
+    let shutdown = std::pin::pin!(shutdown);
+    if let Err(e) = rtu_loop(&mut serial, &bank, unit_id, shutdown).await {
         tracing::error!("modbus rtu server stopped: {e}");
     }
 }
 
+/// Silence that ends a frame whose length its function code does not tell (and flushes noise).
+/// Far above the 3.5 character times of the spec: USB RS-485 adapters deliver bytes in bursts.
+const RTU_GAP: Duration = Duration::from_millis(50);
+
+/// The RTU server loop, with this crate's own framing and checked decoding
+/// ([`super::modbus_guard`]; tokio-modbus's RTU decoder panics on the same FC15 frames as its TCP
+/// one). `Ok(true)`: stopped by `shutdown`; `Ok(false)`: the port reached its end.
+async fn rtu_loop<S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin>(
+    port: &mut S,
+    bank: &Arc<RegisterBank>,
+    unit_id: u8,
+    mut shutdown: std::pin::Pin<&mut impl Future<Output = ()>>,
+) -> std::io::Result<bool> {
+    use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+    let service = RegisterService::new(bank.clone(), Some(unit_id));
+    let mut buf: Vec<u8> = Vec::with_capacity(512);
+    let mut chunk = [0u8; 256];
+    let mut pdu = Vec::with_capacity(MAX_PDU);
+    let mut out = Vec::with_capacity(MAX_PDU + 3);
+    loop {
+        let gap = !buf.is_empty();
+        tokio::select! {
+            () = &mut shutdown => return Ok(true),
+            r = port.read(&mut chunk) => match r? {
+                0 => return Ok(false),
+                n => buf.extend_from_slice(&chunk[..n]),
+            },
+            () = tokio::time::sleep(RTU_GAP), if gap => {
+                // Silence: whatever is left is one frame of a length only the silence tells, or noise.
+                while buf.len() >= 4 {
+                    match rtu_split(&buf) {
+                        RtuSplit::Frame(n) => { rtu_answer(&buf[..n], &service, bank, unit_id, &mut pdu, &mut out); buf.drain(..n); }
+                        RtuSplit::NeedMore if crc_ok(&buf) => { rtu_answer(&buf, &service, bank, unit_id, &mut pdu, &mut out); buf.clear(); }
+                        RtuSplit::NeedMore | RtuSplit::Skip => { buf.remove(0); }
+                    }
+                    if !out.is_empty() { port.write_all(&out).await?; out.clear(); }
+                }
+                buf.clear();
+                continue;
+            }
+        }
+        loop {
+            match rtu_split(&buf) {
+                RtuSplit::Frame(n) => {
+                    rtu_answer(&buf[..n], &service, bank, unit_id, &mut pdu, &mut out);
+                    buf.drain(..n);
+                    if !out.is_empty() {
+                        port.write_all(&out).await?;
+                        out.clear();
+                    }
+                }
+                RtuSplit::Skip => {
+                    buf.remove(0);
+                }
+                RtuSplit::NeedMore => break,
+            }
+        }
+        if buf.len() > 2 * (MAX_PDU + 3) {
+            buf.clear(); // noise that never framed
+        }
+    }
+}
+
+/// Answers one CRC-checked RTU request `adu` into `out` (left empty when no answer is due: another
+/// unit, or a broadcast).
+fn rtu_answer(
+    adu: &[u8],
+    service: &RegisterService,
+    bank: &RegisterBank,
+    unit_id: u8,
+    pdu: &mut Vec<u8>,
+    out: &mut Vec<u8>,
+) {
+    out.clear();
+    let unit = adu[0];
+    if unit != unit_id && unit != 0 {
+        return;
+    }
+    let exception = answer_pdu(&adu[1..adu.len() - 2], |req| service.handle(req), pdu);
+    bank.note_request(exception);
+    if unit == 0 {
+        return;
+    }
+    out.push(unit);
+    out.extend_from_slice(pdu);
+    let crc = crc16(out);
+    out.extend_from_slice(&crc);
+}
+
 /// RTU server role with recovery: opens `cfg.serial_device`, serves, and on an open failure or a
 /// lost device (USB RS-485 adapter unplugged) logs, waits with backoff and reopens, until `shutdown`.
+/// Each opened port is served in its own task: a panic there is counted, logged at most once per
+/// 10 s, and the port reopened.
 pub async fn run_rtu_server(
     cfg: ModbusConfig,
     bank: Arc<RegisterBank>,
@@ -316,31 +407,20 @@ pub async fn run_rtu_server(
     let mut panic_log = LogThrottle::new(TASK_LOG_PERIOD);
     while !*shutdown.borrow() {
         match open_serial(&cfg) {
-            Ok(port) => {
+            Ok(mut port) => {
                 backoff.reset();
                 tracing::info!("modbus rtu server on {} unit {}", cfg.serial_device, cfg.unit_id);
                 let mut rx = shutdown.clone();
-                let stop = async move {
-                    let _ = rx.wait_for(|s| *s).await;
-                };
-                let server = tokio_modbus::server::rtu::Server::new(port);
-                let svc = RegisterService::new(bank.clone(), Some(cfg.unit_id));
-                // serve_until needs a Sync future; run the stop signal through a oneshot.
-                let (tx, orx) = tokio::sync::oneshot::channel::<()>();
-                let relay = tokio::spawn(async move {
-                    stop.await;
-                    let _ = tx.send(());
+                let (b, unit) = (bank.clone(), cfg.unit_id);
+                let serving = tokio::spawn(async move {
+                    let stop = std::pin::pin!(async move {
+                        let _ = rx.wait_for(|s| *s).await;
+                    });
+                    rtu_loop(&mut port, &b, unit, stop).await
                 });
-                // Its own task: tokio-modbus decodes RTU requests itself, and a panic there (see
-                // `modbus_guard`) must restart the server, not end the role.
-                let serving = tokio::spawn(server.serve_until(svc, async move {
-                    let _ = orx.await;
-                }));
-                let res = serving.await;
-                relay.abort();
-                match res {
-                    Ok(Ok(tokio_modbus::server::Terminated::Aborted)) => return,
-                    Ok(Ok(_)) => tracing::warn!("modbus rtu {}: port closed", cfg.serial_device),
+                match serving.await {
+                    Ok(Ok(true)) => return,
+                    Ok(Ok(false)) => tracing::warn!("modbus rtu {}: port closed", cfg.serial_device),
                     Ok(Err(e)) => tracing::warn!("modbus rtu {}: {e}", cfg.serial_device),
                     Err(e) if e.is_panic() => note_panic(&bank, &mut panic_log, "modbus rtu server", e.into_panic()),
                     Err(_) => return,

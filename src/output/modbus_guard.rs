@@ -4,14 +4,17 @@
 //! tokio-modbus 0.17 panics on a write-multiple-coils request (FC15) whose quantity is larger than
 //! eight times its byte count (`decode_packed_coils` indexes out of bounds; upstream
 //! slowtec/tokio-modbus issue 298, open at the time of writing): the 14-byte ADU
-//! `000100000008010f0000001001ff` killed a connection task. The TCP server therefore no longer
-//! hands bytes to tokio-modbus at all: it reads the MBAP header and the PDU itself
-//! ([`read_frame`]), decodes the eight function codes the register map serves with the consistency
-//! checks of the Modbus application protocol v1.1b3 (quantity ranges, byte count = quantity,
-//! PDU length = byte count) ([`decode_request`]) and answers inconsistent requests with exception
-//! 03 (illegal data value) itself. tokio-modbus only supplies the `Request`/`Response` types and
-//! the RTU server; the RTU server task is restarted (and its panic logged, throttled) if it ever
-//! panics.
+//! `000100000008010f0000001001ff` killed a connection task, and the same PDU in an RTU frame kills
+//! the RTU server. So neither server hands bytes to tokio-modbus's decoders: the TCP server reads
+//! the MBAP header and the PDU itself ([`read_frame`]), the RTU server frames by function code and
+//! CRC ([`rtu_split`]); both decode the eight function codes the register map serves with the
+//! consistency checks of the Modbus application protocol v1.1b3 (quantity ranges, byte count =
+//! quantity, PDU length = byte count) ([`decode_request`]) and answer inconsistent requests with
+//! exception 03 (illegal data value) themselves. tokio-modbus only supplies the `Request`/`Response`
+//! types and the client roles. Upstream, the fix is a length check in `decode_packed_coils` (issue
+//! 298); once a fixed release is out, the checks here can stay as they are (they are the spec's).
+//! Should any code on these paths still panic, the connection (or RTU) task ends alone: the
+//! panic is counted (`counters`: modbus-task-panics) and logged at most once per 10 s.
 //!
 //! Framing rules (MBAP, Modbus messaging on TCP/IP v1.0b 3.1.3): protocol id 0; length = unit id +
 //! PDU, 2..=254 bytes. A header breaking them cannot be answered (the frame boundary is lost): the
@@ -177,32 +180,93 @@ pub fn push_header(out: &mut Vec<u8>, transaction: u16, unit: u8, pdu_len: usize
     out.push(unit);
 }
 
-/// The complete answer ADU to `frame`: `handle` is called with the decoded request; a decoding
-/// problem or an exception from `handle` becomes an exception response (function code | 0x80).
-/// Returns whether the answer is an exception.
-pub fn answer(
-    frame: &Frame,
+/// The answer PDU to a request PDU, written to `out` (cleared first): `handle` is called with the
+/// decoded request; a decoding problem or an exception from `handle` becomes an exception PDU
+/// (function code | 0x80). Returns whether the answer is an exception.
+pub fn answer_pdu(
+    pdu: &[u8],
     handle: impl FnOnce(Request<'static>) -> Result<Response, ExceptionCode>,
     out: &mut Vec<u8>,
 ) -> bool {
-    let fc = frame.pdu.first().copied().unwrap_or(0);
-    let mut pdu = Vec::with_capacity(MAX_PDU);
-    let result = decode_request(&frame.pdu).and_then(handle);
-    let exception = match result {
-        Ok(rsp) => match encode_response(&rsp, &mut pdu) {
+    let fc = pdu.first().copied().unwrap_or(0);
+    out.clear();
+    let exception = match decode_request(pdu).and_then(handle) {
+        Ok(rsp) => match encode_response(&rsp, out) {
             Some(()) => None,
             None => Some(ExceptionCode::ServerDeviceFailure),
         },
         Err(e) => Some(e),
     };
     if let Some(e) = exception {
-        pdu.clear();
-        pdu.extend_from_slice(&[fc | 0x80, u8::from(e)]);
+        out.clear();
+        out.extend_from_slice(&[fc | 0x80, u8::from(e)]);
     }
+    exception.is_some()
+}
+
+/// The complete answer ADU (MBAP header + PDU) to a TCP `frame`, see [`answer_pdu`].
+pub fn answer(
+    frame: &Frame,
+    handle: impl FnOnce(Request<'static>) -> Result<Response, ExceptionCode>,
+    out: &mut Vec<u8>,
+) -> bool {
+    let mut pdu = Vec::with_capacity(MAX_PDU);
+    let exception = answer_pdu(&frame.pdu, handle, &mut pdu);
     out.clear();
     push_header(out, frame.transaction, frame.unit, pdu.len());
     out.extend_from_slice(&pdu);
-    exception.is_some()
+    exception
+}
+
+/// Modbus RTU CRC-16 (polynomial 0xA001, initial 0xFFFF), in wire order (low byte first).
+pub fn crc16(data: &[u8]) -> [u8; 2] {
+    let mut crc: u16 = 0xFFFF;
+    for &b in data {
+        crc ^= u16::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 { (crc >> 1) ^ 0xA001 } else { crc >> 1 };
+        }
+    }
+    crc.to_le_bytes()
+}
+
+/// Whether `adu` (address, PDU, CRC) ends with the right CRC.
+pub fn crc_ok(adu: &[u8]) -> bool {
+    adu.len() >= 4 && crc16(&adu[..adu.len() - 2]) == [adu[adu.len() - 2], adu[adu.len() - 1]]
+}
+
+/// What the start of an RTU receive buffer holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RtuSplit {
+    /// A complete request with a good CRC, this many bytes long.
+    Frame(usize),
+    /// Not enough bytes yet to tell (or a function code whose length only the silence after it
+    /// tells).
+    NeedMore,
+    /// The first byte cannot start a frame (bad CRC at the length its function code implies):
+    /// drop it and look again.
+    Skip,
+}
+
+/// Frames RTU requests by the length their function code implies (as tokio-modbus does), checking
+/// the CRC: FC01-06 are 8 bytes, FC15/16 9 + their byte count. Never indexes past `buf`.
+pub fn rtu_split(buf: &[u8]) -> RtuSplit {
+    if buf.len() < 2 {
+        return RtuSplit::NeedMore;
+    }
+    let need = match buf[1] {
+        0x01..=0x06 => 8,
+        0x0F | 0x10 => match buf.get(6) {
+            Some(&count) => 9 + usize::from(count),
+            None => return RtuSplit::NeedMore,
+        },
+        _ => return RtuSplit::NeedMore,
+    };
+    match buf.get(..need) {
+        None => RtuSplit::NeedMore,
+        Some(adu) if crc_ok(adu) => RtuSplit::Frame(need),
+        Some(_) => RtuSplit::Skip,
+    }
 }
 
 #[cfg(test)]
@@ -242,6 +306,22 @@ mod tests {
         assert_eq!(decode_request(&hex("1000640002030001ff")), Err(ExceptionCode::IllegalDataValue), "byte count");
         assert_eq!(decode_request(&hex("2b0e0100")), Err(ExceptionCode::IllegalFunction));
         assert_eq!(decode_request(&[]), Err(ExceptionCode::IllegalFunction));
+    }
+
+    #[test]
+    fn rtu_frames_split_by_function_code_and_crc() {
+        let mut f = hex("050f0000001001ff");
+        f.extend_from_slice(&crc16(&f));
+        assert_eq!(rtu_split(&f), RtuSplit::Frame(f.len()));
+        assert_eq!(rtu_split(&f[..6]), RtuSplit::NeedMore);
+        let mut read = hex("0504000c0001");
+        read.extend_from_slice(&crc16(&read));
+        assert_eq!(crc16(&hex("010300000001")), [0x84, 0x0A], "the textbook example");
+        let mut two = [hex("ff"), read.clone()].concat();
+        assert_eq!(rtu_split(&two), RtuSplit::Skip, "noise before a frame");
+        two.remove(0);
+        assert_eq!(rtu_split(&two), RtuSplit::Frame(8));
+        assert_eq!(rtu_split(&hex("052b0e01")), RtuSplit::NeedMore, "unknown length: the gap decides");
     }
 
     #[tokio::test]
