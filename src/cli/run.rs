@@ -143,7 +143,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             t0.elapsed().as_millis()
         );
         if fault {
-            anyhow::bail!("stopped by {reason}; exiting with an error so that the service manager restarts fme");
+            anyhow::bail!("{reason}: exiting with an error so that the service manager restarts fme");
         }
         Ok::<(), anyhow::Error>(())
     })
