@@ -38,6 +38,7 @@ fn main() -> ExitCode {
     // No colour codes when stderr is not a terminal (journald, pipes).
     let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
     tracing_subscriber::fmt().with_env_filter(filter).with_ansi(ansi).with_writer(std::io::stderr).init();
+    fme::output::log_throttle::throttle_panic_messages(std::time::Duration::from_secs(10));
     let result = match cli.command {
         Command::Synth(a) => cli::synth::run(a),
         Command::Eval(a) => cli::eval::run(a),

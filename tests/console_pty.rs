@@ -7,6 +7,7 @@ mod support;
 use fme::capture::{FrameSource, RecordedSource};
 use fme::service::{Daemon, RunOptions};
 use serialport::SerialPort;
+use std::io::{Read as _, Write as _};
 use std::time::{Duration, Instant};
 
 /// Reads until the reply to one command is complete (a line `OK` or `ERR ...`) or 5 s pass.
@@ -134,6 +135,88 @@ async fn console_commands_and_fuzz() {
     drop(slave);
     let h = shared.health();
     assert!(h.frames_processed > 0);
+    daemon.shutdown().await;
+    if let Err(e) = result {
+        std::panic::resume_unwind(e.into_panic());
+    }
+}
+
+/// A terminal that stops reading (a stalled socat relay, a frozen screen) must not stall the
+/// console: it keeps reading input, drops and counts the output, and answers again once the
+/// terminal reads.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stalled_reader_never_blocks_the_console() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    support::write_sequence(dir.path(), 30, 96, 64, 30);
+    let (mut master, slave) = serialport::TTYPort::pair().expect("pty pair");
+    master.set_timeout(Duration::from_millis(100)).expect("timeout");
+    let mut cfg = support::test_config(dir.path());
+    cfg.console.enabled = true;
+    cfg.console.device = slave.name().expect("pty name");
+    let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
+    let pipeline = support::edge_pipeline(&cfg);
+    let daemon = Daemon::start(cfg, String::new(), source, pipeline, RunOptions::default()).await.expect("start");
+    let shared = daemon.shared().clone();
+
+    let result = tokio::task::spawn_blocking(move || {
+        let mut acc = String::new();
+        let end = Instant::now() + Duration::from_secs(5);
+        let mut buf = [0u8; 4096];
+        while !acc.contains("console ready") {
+            assert!(Instant::now() < end, "no greeting: {acc:?}");
+            if let Ok(n) = master.read(&mut buf) {
+                acc.push_str(&String::from_utf8_lossy(&buf[..n]));
+            }
+        }
+        acc.clear();
+        let dropped_before = fme::console::writer::output_dropped();
+        // Stall: ~140 KB of replies asked for and ~64 KB of input typed, nothing read back. The
+        // writes only complete if the console keeps reading its input; a blocked console would
+        // leave them hanging (checked with a deadline on another thread).
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut ok = true;
+            for _ in 0..200 {
+                ok &= master.write_all(b"help\r\n").is_ok();
+            }
+            let junk = [b"x".repeat(60), b"\r\n".to_vec()].concat();
+            for _ in 0..1000 {
+                ok &= master.write_all(&junk).is_ok();
+            }
+            let _ = tx.send((ok, master));
+        });
+        let (ok, mut master) = rx.recv_timeout(Duration::from_secs(30)).expect("the console stopped reading its input");
+        assert!(ok, "every write reached the console");
+        let dropped = fme::console::writer::output_dropped() - dropped_before;
+        assert!(dropped > 50_000, "output the terminal did not read is dropped and counted: {dropped}");
+        // The terminal reads again: the console catches up, says what was lost and answers.
+        let end = Instant::now() + Duration::from_secs(10);
+        while !acc.contains("bytes of output dropped: the terminal was not reading]") {
+            assert!(Instant::now() < end, "no note of the dropped output: {:?}", &acc[acc.len().saturating_sub(300)..]);
+            if let Ok(n) = master.read(&mut buf) {
+                acc.push_str(&String::from_utf8_lossy(&buf[..n]));
+            }
+        }
+        // Let the console finish the input still queued, then talk to it.
+        let mut quiet_since = Instant::now();
+        while quiet_since.elapsed() < Duration::from_millis(500) {
+            assert!(Instant::now() < end, "the console never went quiet");
+            if let Ok(n) = master.read(&mut buf)
+                && n > 0
+            {
+                quiet_since = Instant::now();
+            }
+        }
+        acc.clear();
+        let port: &mut dyn SerialPort = &mut master;
+        let v = ask(port, &mut acc, "version");
+        assert!(v.contains(env!("CARGO_PKG_VERSION")), "answers after the stall: {v:?}");
+        let c = ask(port, &mut acc, "counters");
+        assert!(c.contains("console-output-dropped "), "{c:?}");
+    })
+    .await;
+    drop(slave);
+    assert!(shared.last_logs(50).iter().any(|l| l.contains("terminal is not reading")), "the stall is logged");
     daemon.shutdown().await;
     if let Err(e) = result {
         std::panic::resume_unwind(e.into_panic());

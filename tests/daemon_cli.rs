@@ -191,3 +191,161 @@ fn missing_model_or_onnx_runtime_is_named_at_start() {
     assert!(!out.status.success(), "{err}");
     assert!(err.contains("ONNX Runtime") && err.contains("/nonexistent/ort/libonnxruntime.so"), "{err}");
 }
+
+/// A free local port (bound, then released) for a daemon the test talks to.
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("free port")
+}
+
+/// One FC04 read of the heartbeat (register 12) over raw Modbus TCP; `None` if not served.
+fn heartbeat(port: u16) -> Option<u16> {
+    use std::io::Write as _;
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).ok()?;
+    s.set_read_timeout(Some(Duration::from_secs(2))).ok()?;
+    s.write_all(&[0, 7, 0, 0, 0, 6, 1, 4, 0, 12, 0, 1]).ok()?;
+    let mut ans = [0u8; 11];
+    s.read_exact(&mut ans).ok()?;
+    (ans[7] == 4).then(|| u16::from_be_bytes([ans[9], ans[10]]))
+}
+
+fn wait_exit(child: &mut std::process::Child, within: Duration) -> Option<std::process::ExitStatus> {
+    let end = Instant::now() + within;
+    while Instant::now() < end {
+        if let Ok(Some(s)) = child.try_wait() {
+            return Some(s);
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    None
+}
+
+fn stderr_of(child: &mut std::process::Child) -> String {
+    let mut err = String::new();
+    if let Some(mut e) = child.stderr.take() {
+        let _ = e.read_to_string(&mut err);
+    }
+    err
+}
+
+fn spawn_recording(dir: &std::path::Path, port: u16) -> std::process::Child {
+    support::write_sequence(&dir.join("seq"), 20, 64, 48, 30);
+    let cfg = write(dir, "run.toml", "[output]\nrate_hz = 10.0\n");
+    fme()
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .arg("--source")
+        .arg(dir.join("seq"))
+        .args(["--modbus-listen", &format!("127.0.0.1:{port}")])
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("spawn")
+}
+
+fn served(port: u16) -> Option<u16> {
+    let end = Instant::now() + Duration::from_secs(10);
+    while Instant::now() < end {
+        if let Some(hb) = heartbeat(port) {
+            return Some(hb);
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    None
+}
+
+#[test]
+fn sighup_keeps_the_daemon_serving() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let port = free_port();
+    let mut child = spawn_recording(dir.path(), port);
+    let before = served(port);
+    assert!(before.is_some(), "daemon never served Modbus");
+    let st = Command::new("kill").args(["-HUP", &child.id().to_string()]).status().expect("kill");
+    assert!(st.success());
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(child.try_wait().expect("wait").is_none(), "SIGHUP must not stop fme");
+    let after = heartbeat(port);
+    assert!(after.is_some() && after != before, "still serving, heartbeat moving: {before:?} -> {after:?}");
+    let st = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill");
+    assert!(st.success());
+    let status = wait_exit(&mut child, Duration::from_secs(5));
+    let err = stderr_of(&mut child);
+    assert_eq!(status.and_then(|s| s.code()), Some(0), "{err}");
+    assert!(err.contains("SIGHUP: not stopping"), "{err}");
+}
+
+#[test]
+fn unexpected_signals_stop_cleanly_with_a_failure_exit_code() {
+    for sig in ["USR1", "USR2", "QUIT"] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let port = free_port();
+        let mut child = spawn_recording(dir.path(), port);
+        assert!(served(port).is_some(), "daemon never served Modbus");
+        let st = Command::new("kill").args([&format!("-{sig}"), &child.id().to_string()]).status().expect("kill");
+        assert!(st.success());
+        let status = wait_exit(&mut child, Duration::from_secs(5));
+        let err = stderr_of(&mut child);
+        assert_eq!(status.and_then(|s| s.code()), Some(1), "SIG{sig}: exit 1 so systemd restarts fme: {err}");
+        assert!(err.contains(&format!("SIG{sig}: shutting down")), "{err}");
+        assert!(err.contains("stopped in") && err.contains("frames captured"), "the SIGTERM way: {err}");
+    }
+}
+
+#[test]
+fn each_broken_startup_input_exits_2_naming_the_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let seq = dir.path().join("seq");
+    support::write_sequence(&seq, 5, 64, 48, 30);
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string("tests/data/swarm20/meta.json").expect("meta")).expect("json");
+    let mut one = meta.clone();
+    one["reference_objects"] = serde_json::Value::Array(vec![meta["reference_objects"][0].clone()]);
+    let one_ref = write(dir.path(), "one-ref.json", &one.to_string());
+    let mut none = meta.clone();
+    none["reference_objects"] = serde_json::Value::Array(vec![]);
+    let no_ref = write(dir.path(), "no-ref.json", &none.to_string());
+    let corrupt = write(dir.path(), "corrupt.onnx", "not an onnx model");
+    let no_ini = dir.path().join("no-ini");
+    std::fs::create_dir_all(no_ini.join("img1")).expect("mkdir");
+    let l = "[output.modbus]\nlisten = \"127.0.0.1:0\"\n";
+    let cases: Vec<(String, Option<&std::path::Path>, String)> = vec![
+        (format!("[camera]\ncalibration = \"{}\"\n{l}", one_ref.display()), None, one_ref.display().to_string()),
+        (format!("[camera]\ncalibration = \"{}\"\n{l}", no_ref.display()), None, no_ref.display().to_string()),
+        (format!("[camera]\ncalibration = \"/nonexistent/calib.json\"\n{l}"), None, "/nonexistent/calib.json".into()),
+        (format!("[detector]\nmodel = \"{}\"\n{l}", corrupt.display()), None, corrupt.display().to_string()),
+        (format!("[detector]\nmodel = \"/nonexistent/det.onnx\"\n{l}"), None, "/nonexistent/det.onnx".into()),
+        (format!("[detector]\nmodel = \"\"\n{l}"), None, "detector.model".into()),
+        (l.to_string(), Some(no_ini.as_path()), no_ini.join("seqinfo.ini").display().to_string()),
+        ("[output.modbus]\nlisten = \"256.256.256.256:502\"\n".into(), None, "output.modbus.listen".into()),
+        ("[sourcee]\nwidth = 1\n".into(), None, "key `sourcee`".into()),
+    ];
+    for (text, source, named) in cases {
+        let cfg = write(dir.path(), "bad.toml", &text);
+        let out = fme()
+            .args(["run", "--config"])
+            .arg(&cfg)
+            .arg("--source")
+            .arg(source.unwrap_or(&seq))
+            .output()
+            .expect("run fme");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{text:?} -> {err}");
+        assert!(err.contains(&named), "{text:?}: the message must name {named}: {err}");
+        assert!(!err.contains("target/") && !err.contains("sourcee.sourcee"), "{text:?}: {err}");
+    }
+}
+
+#[test]
+fn port_in_use_is_a_runtime_fault_reported_once() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    support::write_sequence(&dir.path().join("seq"), 5, 64, 48, 30);
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+    let port = taken.local_addr().expect("addr").port();
+    let cfg = write(dir.path(), "run.toml", &format!("[output.modbus]\nlisten = \"127.0.0.1:{port}\"\n"));
+    let out =
+        fme().args(["run", "--config"]).arg(&cfg).arg("--source").arg(dir.path().join("seq")).output().expect("run");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert_eq!(err.matches("in use").count(), 1, "printed once: {err}");
+    assert!(err.contains("output.modbus.listen"), "{err}");
+}

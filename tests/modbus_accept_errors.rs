@@ -32,7 +32,7 @@ async fn tcp_server_keeps_accepting_after_running_out_of_file_descriptors() {
     let bank = Arc::new(RegisterBank::new());
     let (listener, addr) = modbus::bind_tcp("127.0.0.1:0").await.expect("bind");
     let (_stop, rx) = tokio::sync::oneshot::channel::<()>();
-    let limits = TcpLimits { max_connections: 64, idle_timeout: None };
+    let limits = TcpLimits { max_connections: 64, max_per_peer: 64, idle_timeout: None, ..TcpLimits::default() };
     tokio::spawn(modbus::serve_tcp(listener, bank.clone(), limits, async move {
         let _ = rx.await;
     }));

@@ -124,7 +124,7 @@ async fn read_ok(ctx: &mut tokio_modbus::client::Context) -> bool {
 #[tokio::test]
 async fn tcp_server_closes_a_connection_idle_past_the_timeout_and_keeps_a_polling_one() {
     let bank = sample_bank();
-    let limits = TcpLimits { max_connections: 8, idle_timeout: Some(Duration::from_secs(1)) };
+    let limits = TcpLimits { max_connections: 8, idle_timeout: Some(Duration::from_secs(1)), ..TcpLimits::default() };
     let (addr, _stop) = start_tcp_with(bank.clone(), limits).await;
     let mut polling = tcp::connect_slave(addr, Slave(1)).await.expect("connect polling");
     let mut idle = tcp::connect_slave(addr, Slave(1)).await.expect("connect idle");
@@ -147,7 +147,8 @@ async fn an_evicted_stream_keeps_failing_when_polled_again() {
     use tokio::io::AsyncReadExt as _;
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
     let addr = listener.local_addr().expect("addr");
-    let conns = Connections::new(TcpLimits { max_connections: 1, idle_timeout: None }, sample_bank());
+    let conns =
+        Connections::new(TcpLimits { max_connections: 1, idle_timeout: None, ..TcpLimits::default() }, sample_bank());
     let _ca = tokio::net::TcpStream::connect(addr).await.expect("connect a");
     let (sa, peer_a) = listener.accept().await.expect("accept a");
     let mut a = conns.admit(sa, peer_a);
@@ -166,7 +167,7 @@ async fn an_evicted_stream_keeps_failing_when_polled_again() {
 #[tokio::test]
 async fn tcp_server_at_its_connection_limit_closes_the_least_recently_active_for_a_new_one() {
     let bank = sample_bank();
-    let limits = TcpLimits { max_connections: 2, idle_timeout: None };
+    let limits = TcpLimits { max_connections: 2, idle_timeout: None, ..TcpLimits::default() };
     let (addr, _stop) = start_tcp_with(bank.clone(), limits).await;
     let mut a = tcp::connect_slave(addr, Slave(1)).await.expect("connect a");
     let mut b = tcp::connect_slave(addr, Slave(1)).await.expect("connect b");
@@ -249,5 +250,47 @@ async fn daemon_rtu_server_role_and_missing_adapter() {
     }
     assert!(beats.windows(2).all(|w| w[1] > w[0]), "heartbeat over RTU: {beats:?}");
     d.shutdown().await;
+    drop(box_end);
+}
+
+/// The RTU server frames and checks requests itself too: the frame of upstream issue 298 (FC15,
+/// quantity 16 with one data byte), which panics tokio-modbus's RTU decoder, gets exception 03,
+/// and the server goes on serving.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rtu_server_answers_the_fc15_frame_that_panics_tokio_modbus_with_exception_03() {
+    use fme::output::modbus_guard::crc16;
+    use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+    use tokio_serial::SerialPort as _;
+    let bank = sample_bank();
+    let (mut plc, box_end) = tokio_serial::SerialStream::pair().expect("pty pair");
+    let cfg = fme::config::ModbusConfig {
+        mode: ModbusMode::RtuServer,
+        serial_device: box_end.name().expect("pty name"),
+        parity: fme::config::Parity::None,
+        unit_id: 5,
+        reconnect_min_ms: 50,
+        reconnect_max_ms: 100,
+        ..Default::default()
+    };
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let role = tokio::spawn(modbus::run_rtu_server(cfg, bank.clone(), stop_rx));
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    // Noise first, then the frame: the server resynchronises on the CRC.
+    let mut frame = vec![5u8, 0x0f, 0x00, 0x00, 0x00, 0x10, 0x01, 0xff];
+    frame.extend_from_slice(&crc16(&frame));
+    plc.write_all(&[0xff, 0x00]).await.expect("write noise");
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    plc.write_all(&frame).await.expect("write");
+    let mut want = vec![5u8, 0x8f, 0x03];
+    want.extend_from_slice(&crc16(&want));
+    let mut got = vec![0u8; want.len()];
+    tokio::time::timeout(Duration::from_secs(2), plc.read_exact(&mut got)).await.expect("answered").expect("read");
+    assert_eq!(got, want, "exception 03 (illegal data value)");
+    let mut ctx = rtu::attach_slave(plc, Slave(5));
+    let r = tokio::time::timeout(Duration::from_secs(2), ctx.read_input_registers(12, 1)).await;
+    assert!(matches!(r, Ok(Ok(Ok(ref v))) if *v == vec![42]), "still serving: {r:?}");
+    assert_eq!(bank.counters().task_panics, 0);
+    assert!(!role.is_finished(), "the role keeps running");
+    let _ = stop_tx.send(true);
     drop(box_end);
 }

@@ -8,12 +8,15 @@ pub mod synth;
 pub mod track;
 pub mod tune;
 
-/// Process exit code for an error: 2 for invalid configuration or usage, 1 for everything else.
+/// Process exit code for an error: 2 for a problem with what fme was given (usage, configuration,
+/// source, calibration, model files; the message names the file or key), 1 for everything else
+/// (runtime faults).
 pub fn exit_code(err: &anyhow::Error) -> u8 {
     if err.chain().any(|e| e.downcast_ref::<UsageError>().is_some()) { 2 } else { 1 }
 }
 
-/// An error in what the user asked for (bad configuration key, bad flag combination): exit code 2.
+/// An error in what the user gave fme (bad flag or configuration key, unreadable source,
+/// calibration or model file): exit code 2.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
 pub struct UsageError(pub String);

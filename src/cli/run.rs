@@ -3,6 +3,7 @@
 use crate::capture::{CaptureError, FrameSource, RecordedSource, V4l2Source};
 use crate::cli::{ConfigArgs, UsageError, set_text, set_value};
 use crate::config::Config;
+use crate::service::signals::{SignalEvent, Signals};
 use crate::service::{self, Daemon, RunOptions};
 use anyhow::Context as _;
 use std::path::PathBuf;
@@ -86,7 +87,8 @@ fn open_source(cfg: &Config) -> anyhow::Result<Box<dyn FrameSource>> {
     match RecordedSource::open(path, cfg.source.realtime, cfg.source.looping) {
         Ok(s) => Ok(Box::new(s)),
         Err(e @ CaptureError::NotFound { .. }) => Err(UsageError(format!("source.path / --source: {e}")).into()),
-        Err(e) => Err(anyhow::Error::new(e).context("source.path / --source")),
+        // A recording that cannot be read (no seqinfo.ini, bad frames list) is a start-up input problem.
+        Err(e) => Err(UsageError(format!("source.path / --source: {e}")).into()),
     }
 }
 
@@ -97,23 +99,36 @@ pub fn memory_kb() -> Option<(u64, u64)> {
     Some((get("VmRSS:")?, get("VmHWM:")?))
 }
 
-/// Runs `fme run`.
+/// Runs `fme run`. Exit codes ([`crate::cli::exit_code`]): 2 for a start-up input problem
+/// (usage, configuration, source, calibration, model; the message names the file or key), 1 for a
+/// runtime fault (port in use, a thread that died, a stop by an unexpected signal: systemd's
+/// `Restart=on-failure` restarts fme), 0 for a stop that was asked for (SIGTERM, SIGINT, end of a
+/// recording).
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let (cfg, text) = effective_config(&args)?;
-    let source = open_source(&cfg)?;
-    let pipeline = service::build_pipeline(&cfg)?;
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("tokio runtime")?;
     let opts = RunOptions { max_frames: args.max_frames, series: args.series.clone() };
     rt.block_on(async move {
+        // First, so that no signal during the (slow) model loading ends the process uncleanly.
+        let mut signals = Signals::install().context("installing the signal handlers")?;
+        let source = open_source(&cfg)?;
+        let pipeline = service::build_pipeline(&cfg).map_err(|e| UsageError(e.to_string()))?;
         let mut daemon = Daemon::start(cfg, text, source, pipeline, opts).await?;
-        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-            .context("installing the SIGTERM handler")?;
-        let reason = tokio::select! {
-            _ = term.recv() => "SIGTERM",
-            _ = tokio::signal::ctrl_c() => "SIGINT",
-            ok = daemon.finished() => if ok { "end of input" } else { "pipeline thread died" },
+        let (reason, fault) = loop {
+            tokio::select! {
+                ev = signals.next() => match ev {
+                    SignalEvent::Hangup => daemon.on_hangup(),
+                    SignalEvent::Stop(name) => break (name, false),
+                    SignalEvent::Unexpected(name) => break (name, true),
+                },
+                ok = daemon.finished() => break if ok { ("end of input", false) } else { ("pipeline thread died", true) },
+            }
         };
-        tracing::info!("{reason}: shutting down");
+        if fault {
+            daemon.shared().log(tracing::Level::ERROR, format!("{reason}: shutting down (not asked for: exit code 1)"));
+        } else {
+            tracing::info!("{reason}: shutting down");
+        }
         let shared = daemon.shared().clone();
         let t0 = std::time::Instant::now();
         daemon.shutdown().await;
@@ -132,8 +147,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             hwm,
             t0.elapsed().as_millis()
         );
-        if reason == "pipeline thread died" {
-            anyhow::bail!("the pipeline thread died; exiting with an error so that the service manager restarts fme");
+        if fault {
+            anyhow::bail!("{reason}: exiting with an error so that the service manager restarts fme");
         }
         Ok::<(), anyhow::Error>(())
     })

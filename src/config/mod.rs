@@ -5,6 +5,7 @@
 //! the dotted key (`output.modbus.mode`), so a technician can fix the file without reading code.
 //! The pipeline sections are the stage modules' own types; this module composes and checks them.
 
+pub mod allow;
 mod lines;
 mod schema;
 mod stages;
@@ -213,6 +214,15 @@ impl Config {
         if m.max_connections == 0 || m.max_connections > 64 {
             return err("output.modbus.max_connections", format!("must be 1..=64, got {}", m.max_connections));
         }
+        if m.max_connections_per_peer == 0 || m.max_connections_per_peer > 64 {
+            return err(
+                "output.modbus.max_connections_per_peer",
+                format!("must be 1..=64 (at most max_connections apply), got {}", m.max_connections_per_peer),
+            );
+        }
+        if let Err(e) = allow::AllowList::parse(&m.allow) {
+            return err("output.modbus.allow", e);
+        }
         if self.output.serial.enabled && self.output.serial.baud == 0 {
             return err("output.serial.baud", "must be > 0");
         }
@@ -248,9 +258,13 @@ pub fn is_host_port(s: &str) -> bool {
     }
     match s.rsplit_once(':') {
         Some((host, port)) => {
+            // A host of digits and dots is meant as an IPv4 address and must be one
+            // (`256.256.256.256` is not a name to look up later).
+            let dotted = host.chars().all(|c| c.is_ascii_digit() || c == '.');
             port.parse::<u16>().is_ok()
                 && !host.is_empty()
                 && host.chars().all(|c| c.is_ascii_alphanumeric() || c == '.' || c == '-')
+                && (!dotted || host.parse::<std::net::Ipv4Addr>().is_ok())
         }
         None => false,
     }
@@ -279,6 +293,28 @@ mod tests {
             }
             other => panic!("expected Invalid, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn unknown_section_named_once() {
+        let e = parse("[source]\nwidth = 640\n[sourcee]\nwidth = 1\n").err();
+        match e {
+            Some(ConfigError::Invalid { line, key, .. }) => assert_eq!((line, key.as_str()), (3, "sourcee")),
+            other => panic!("expected Invalid, got {other:?}"),
+        }
+        let e = parse("[output.modbuss]\nmode = \"off\"\n").err();
+        assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.modbuss"), "{e:?}");
+    }
+
+    #[test]
+    fn modbus_allow_and_per_peer_limit_checked() {
+        let e = parse("[output.modbus]\nallow = [\"192.168.1.0/24\", \"plc.local\"]\n").err();
+        assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.modbus.allow"), "{e:?}");
+        let e = parse("[output.modbus]\nmax_connections_per_peer = 0\n").err();
+        assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.modbus.max_connections_per_peer"), "{e:?}");
+        let c = parse("[output.modbus]\nallow = [\"10.1.2.0/24\"]\n").expect("valid");
+        let l = allow::AllowList::parse(&c.output.modbus.allow).expect("checked");
+        assert!(l.permits("10.1.2.9".parse().expect("ip")) && !l.permits("10.1.3.9".parse().expect("ip")));
     }
 
     #[test]
@@ -334,7 +370,9 @@ mod tests {
         for ok in ["0.0.0.0:502", "[::1]:5020", "localhost:5020", "plc-1.farm.local:502"] {
             assert!(is_host_port(ok), "{ok}");
         }
-        for bad in ["localhost", ":502", "plc:99999", "plc 1:502", ""] {
+        for bad in
+            ["localhost", ":502", "plc:99999", "plc 1:502", "", "256.256.256.256:502", "10.0.0:502", "1.2.3.4.5:502"]
+        {
             assert!(!is_host_port(bad), "{bad}");
         }
     }

@@ -80,6 +80,9 @@ pub struct SourceConfig {
     pub reconnect_min_ms: u64,
     /// Longest reconnect delay, ms.
     pub reconnect_max_ms: u64,
+    /// Largest frame accepted, pixels (read from the JPEG header before decoding); larger frames
+    /// are dropped as bad frames. 0 = 4 x the larger of `width` x `height` and the source's size.
+    pub max_pixels: u64,
 }
 
 impl Default for SourceConfig {
@@ -97,6 +100,7 @@ impl Default for SourceConfig {
             queue_frames: 4,
             reconnect_min_ms: 500,
             reconnect_max_ms: 30_000,
+            max_pixels: 0,
         }
     }
 }
@@ -193,9 +197,15 @@ pub struct ModbusConfig {
     /// TCP server: connections served at once; one more closes the least recently active
     /// (Modbus TCP implementation guide 4.2.1).
     pub max_connections: u32,
-    /// TCP server: close a connection with no request for this long, ms (0 = never); keep it well
-    /// above the PLC's poll interval.
+    /// TCP server: connections served at once from one IP address (at most `max_connections`); one
+    /// more closes one of that address's own.
+    pub max_connections_per_peer: u32,
+    /// TCP server: close a connection with no complete request for this long, ms (0 = never);
+    /// keep it well above the PLC's poll interval.
     pub idle_timeout_ms: u64,
+    /// TCP server: addresses or CIDR ranges allowed to connect (`["192.168.1.0/24"]`); empty =
+    /// everyone. Others are closed at accept and counted (console `counters`).
+    pub allow: Vec<String>,
 }
 
 impl Default for ModbusConfig {
@@ -215,7 +225,9 @@ impl Default for ModbusConfig {
             reconnect_min_ms: 500,
             reconnect_max_ms: 30_000,
             max_connections: 8,
+            max_connections_per_peer: 4,
             idle_timeout_ms: 60_000,
+            allow: Vec::new(),
         }
     }
 }

@@ -2,8 +2,11 @@
 //!
 //! Works with picocom/screen at 115200 baud. Every reply ends with a line `OK` or `ERR <reason>`, so
 //! scripts can parse it. Garbage, over-long lines and binary noise get an `ERR` line and never stop
-//! the daemon. Commands: `help`, `status`, `version`, `activity`, `tracks`, `calib`, `regs`,
+//! the daemon. Output never blocks the console ([`writer`]): a terminal that stops reading loses
+//! output (counted: `console-output-dropped`), never its input. Commands: `help`, `status`, `version`, `activity`, `tracks`, `calib`, `regs`,
 //! `counters`, `log [n]`, `stream on|off`, `config`.
+
+pub mod writer;
 
 use crate::output::registers::{self, BLOCK_LEN, status};
 use crate::service::health::Shared;
@@ -176,6 +179,10 @@ impl Session {
             match e {
                 LineEvent::Line(l) => self.command(&l, shared, out),
                 LineEvent::TooLong => {
+                    // The echoed characters are on the line: the error goes on its own.
+                    if self.echo {
+                        out.push_str("\r\n");
+                    }
                     let _ = write!(out, "ERR line too long (max {MAX_LINE} characters)\r\n");
                 }
                 LineEvent::Binary => out.push_str("ERR binary input ignored\r\n"),
@@ -261,7 +268,7 @@ impl Session {
                 let q = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.0} ms"));
                 let _ = write!(
                     body,
-                    "frames-captured {}\nframes-processed {}\nframes-dropped {}\ncamera-fps {:.1}\ncapture-errors {}\nreconnects {}\npipeline-errors {}\nupdates {}\nmodbus-requests {}\nmodbus-exceptions {}\nmodbus-tcp-open {}\nmodbus-tcp-idle-closed {}\nmodbus-tcp-evicted {}\nmodbus-tcp-accept-errors {}\nplc-writes {}\nplc-failures {}\nlatency-p50 {}\nlatency-p99 {}",
+                    "frames-captured {}\nframes-processed {}\nframes-dropped {}\ncamera-fps {:.1}\ncapture-errors {}\nreconnects {}\npipeline-errors {}\nupdates {}\nmodbus-requests {}\nmodbus-exceptions {}\nmodbus-tcp-open {}\nmodbus-tcp-idle-closed {}\nmodbus-tcp-evicted {}\nmodbus-tcp-accept-errors {}\nmodbus-tcp-refused {}\nmodbus-tcp-bad-frames {}\nmodbus-task-panics {}\nplc-writes {}\nplc-failures {}\nconsole-output-dropped {}\nlatency-p50 {}\nlatency-p99 {}",
                     h.frames_captured,
                     h.frames_processed,
                     h.frames_dropped,
@@ -276,8 +283,12 @@ impl Session {
                     m.tcp_idle_closed,
                     m.tcp_evicted,
                     m.tcp_accept_errors,
+                    m.tcp_refused,
+                    m.tcp_bad_frames,
+                    m.task_panics,
                     m.client_writes,
                     m.client_failures,
+                    writer::output_dropped(),
                     q(h.latency.quantile_ms(0.5)),
                     q(h.latency.quantile_ms(0.99)),
                 );
@@ -335,13 +346,20 @@ impl Session {
 }
 
 /// Serves the console on an open port until a stop is requested. I/O errors end the session (the
-/// caller reopens the device).
-pub fn serve(port: &mut dyn serialport::SerialPort, shared: &Shared, echo: bool) -> std::io::Result<()> {
+/// caller reopens the device). Writes never wait ([`writer`]): input is read every 100 ms at the
+/// latest whatever the peer does with the output.
+pub fn serve(port: &mut serialport::TTYPort, shared: &Shared, echo: bool) -> std::io::Result<()> {
+    use std::io::Read as _;
+    use std::os::fd::AsRawFd as _;
+    let fd = port.as_raw_fd();
+    writer::set_nonblocking(fd)?;
+    let mut output = writer::OutputBuffer::new(writer::OUTPUT_CAP);
     let mut session = Session { echo, ..Session::default() };
     let mut buf = [0u8; 256];
     let mut out = String::with_capacity(1024);
     let mut last_hb = shared.bank.block()[12];
-    port.write_all(b"fme console ready (type help)\r\n")?;
+    let mut stalled = false;
+    output.push(b"fme console ready (type help)\r\n");
     while !shared.stopping() {
         match port.read(&mut buf) {
             Ok(0) => {}
@@ -365,9 +383,20 @@ pub fn serve(port: &mut dyn serialport::SerialPort, shared: &Shared, echo: bool)
         }
         last_hb = hb;
         if !out.is_empty() {
-            port.write_all(out.as_bytes())?;
-            port.flush()?;
+            output.push(out.as_bytes());
             out.clear();
+        }
+        output.write_to(|b| writer::write_nonblocking(fd, b))?;
+        match (output.dropped_now() > 0, stalled) {
+            (true, false) => {
+                stalled = true;
+                shared.log(
+                    tracing::Level::WARN,
+                    "console: the terminal is not reading; its output is dropped (counted) until it does".to_string(),
+                );
+            }
+            (false, true) => stalled = false,
+            _ => {}
         }
     }
     Ok(())
@@ -377,11 +406,11 @@ pub fn serve(port: &mut dyn serialport::SerialPort, shared: &Shared, echo: bool)
 pub fn run_on_device(device: &str, baud: u32, echo: bool, shared: &Shared) {
     let mut backoff = crate::capture::Backoff::new(Duration::from_millis(500), Duration::from_secs(30));
     while !shared.stopping() {
-        match serialport::new(device, baud).timeout(Duration::from_millis(100)).open() {
+        match serialport::new(device, baud).timeout(Duration::from_millis(100)).open_native() {
             Ok(mut port) => {
                 backoff.reset();
                 shared.log(tracing::Level::INFO, format!("console on {device} at {baud} baud"));
-                if let Err(e) = serve(port.as_mut(), shared, echo) {
+                if let Err(e) = serve(&mut port, shared, echo) {
                     shared.log(tracing::Level::WARN, format!("console {device}: {e}"));
                 }
             }
@@ -469,6 +498,23 @@ mod tests {
         assert_eq!(sess.partial_echo(), None);
         sess.feed(b"\x01", &s, &mut out);
         assert_eq!(sess.partial_echo(), None, "binary input is not redrawn");
+    }
+
+    #[test]
+    fn an_over_long_line_gets_its_error_on_its_own_line_with_echo() {
+        let s = shared();
+        let mut sess = Session { echo: true, ..Session::default() };
+        let mut out = String::new();
+        sess.feed(&[b'a'; 100], &s, &mut out);
+        sess.feed(b"\r\nversion\r\n", &s, &mut out);
+        let lines: Vec<&str> = out.split("\r\n").collect();
+        assert_eq!(lines[0], "a".repeat(MAX_LINE), "the echo stops at the limit");
+        assert!(lines[1].starts_with("ERR line too long"), "{out:?}");
+        assert!(out.ends_with("OK\r\n"));
+        let mut quiet = Session::default();
+        let mut out = String::new();
+        quiet.feed(&[b'a'; 100], &s, &mut out);
+        assert!(out.starts_with("ERR line too long"), "no echo, no extra line: {out:?}");
     }
 
     #[test]

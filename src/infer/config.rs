@@ -71,6 +71,7 @@ impl Default for DetectorConfig {
 impl DetectorConfig {
     /// Checks ranges; the error names the key.
     pub fn validate(&self) -> Result<(), InferError> {
+        model("detector.model", &self.model)?;
         rate("detector.rate_hz", self.rate_hz)?;
         unit("detector.confidence", self.confidence)?;
         unit("detector.nms_iou", self.nms_iou)?;
@@ -151,6 +152,7 @@ impl Default for DepthConfig {
 impl DepthConfig {
     /// Checks ranges; the error names the key.
     pub fn validate(&self) -> Result<(), InferError> {
+        model("depth.model", &self.model)?;
         rate("depth.rate_hz", self.rate_hz)?;
         threads("depth.threads", self.threads)?;
         if self.std.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
@@ -176,6 +178,14 @@ impl DepthConfig {
     /// The ONNX Runtime session options of this network.
     pub fn session(&self) -> SessionOptions {
         SessionOptions { intra_threads: self.threads, spin: self.spin }
+    }
+}
+
+fn model(key: &'static str, p: &std::path::Path) -> Result<(), InferError> {
+    if p.as_os_str().is_empty() {
+        Err(InferError::Config { key, reason: "must name an ONNX model file".into() })
+    } else {
+        Ok(())
     }
 }
 

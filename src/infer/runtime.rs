@@ -99,15 +99,16 @@ fn init_with(candidates: Vec<(PathBuf, &'static str)>) -> Result<&'static Enviro
 
 /// Finds a model file: as given, else (relative paths) beside the repository or install prefix of
 /// the running executable (`target/release/fme` -> the repository; `bin/fme` -> `share/fme/`).
+/// An empty path stays empty (never a directory that happens to exist), and only files are found.
 pub fn resolve_model(path: &Path) -> PathBuf {
-    if path.is_absolute() || path.exists() {
+    if path.as_os_str().is_empty() || path.is_absolute() || path.exists() {
         return path.to_path_buf();
     }
     let exe_dir = std::env::current_exe().ok().and_then(|p| p.parent().map(Path::to_path_buf));
     if let Some(dir) = exe_dir {
         for base in [dir.join("../.."), dir.join("../share/fme")] {
             let p = base.join(path);
-            if p.exists() {
+            if p.is_file() {
                 return p;
             }
         }

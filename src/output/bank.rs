@@ -24,6 +24,9 @@ pub struct RegisterBank {
     tcp_idle_closed: AtomicU64,
     tcp_evicted: AtomicU64,
     tcp_accept_errors: AtomicU64,
+    tcp_refused: AtomicU64,
+    tcp_bad_frames: AtomicU64,
+    task_panics: AtomicU64,
 }
 
 impl Default for RegisterBank {
@@ -51,6 +54,12 @@ pub struct ModbusCounters {
     pub tcp_evicted: u64,
     /// TCP server: failed accepts (each retried after a pause).
     pub tcp_accept_errors: u64,
+    /// TCP server: connections closed at accept because the peer is not in `output.modbus.allow`.
+    pub tcp_refused: u64,
+    /// TCP server: connections closed on a frame that cannot be framed (bad MBAP header).
+    pub tcp_bad_frames: u64,
+    /// Server roles: connection or server tasks that panicked (each logged at most once per 10 s).
+    pub task_panics: u64,
 }
 
 impl RegisterBank {
@@ -70,6 +79,9 @@ impl RegisterBank {
             tcp_idle_closed: AtomicU64::new(0),
             tcp_evicted: AtomicU64::new(0),
             tcp_accept_errors: AtomicU64::new(0),
+            tcp_refused: AtomicU64::new(0),
+            tcp_bad_frames: AtomicU64::new(0),
+            task_panics: AtomicU64::new(0),
         }
     }
 
@@ -138,6 +150,18 @@ impl RegisterBank {
         self.tcp_accept_errors.fetch_add(1, Ordering::Relaxed);
     }
 
+    pub(crate) fn note_tcp_refused(&self) {
+        self.tcp_refused.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub(crate) fn note_tcp_bad_frame(&self) {
+        self.tcp_bad_frames.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub(crate) fn note_task_panic(&self) {
+        self.task_panics.fetch_add(1, Ordering::Relaxed);
+    }
+
     /// Server roles: whether a request was served within `window`.
     pub fn served_within(&self, window: Duration) -> bool {
         let last = self.last_request_ms.load(Ordering::Relaxed);
@@ -160,6 +184,9 @@ impl RegisterBank {
             tcp_idle_closed: self.tcp_idle_closed.load(Ordering::Relaxed),
             tcp_evicted: self.tcp_evicted.load(Ordering::Relaxed),
             tcp_accept_errors: self.tcp_accept_errors.load(Ordering::Relaxed),
+            tcp_refused: self.tcp_refused.load(Ordering::Relaxed),
+            tcp_bad_frames: self.tcp_bad_frames.load(Ordering::Relaxed),
+            task_panics: self.task_panics.load(Ordering::Relaxed),
         }
     }
 }

@@ -36,6 +36,37 @@ impl LogThrottle {
     }
 }
 
+/// Makes the process-wide panic message (the default hook: message and backtrace, kilobytes each)
+/// appear at most once per `period`, with the number not printed since. A peer that could trigger
+/// a panic in a connection task on every frame must not flood the journal; the tasks themselves
+/// count every panic.
+pub fn throttle_panic_messages(period: Duration) {
+    let default = std::panic::take_hook();
+    let state = std::sync::Mutex::new((None::<std::time::Instant>, 0u64));
+    std::panic::set_hook(Box::new(move |info| {
+        let now = std::time::Instant::now();
+        let held_back = {
+            let mut s = state.lock().unwrap_or_else(|p| p.into_inner());
+            match s.0 {
+                Some(last) if now.saturating_duration_since(last) < period => {
+                    s.1 += 1;
+                    None
+                }
+                _ => {
+                    s.0 = Some(now);
+                    Some(std::mem::take(&mut s.1))
+                }
+            }
+        };
+        if let Some(n) = held_back {
+            default(info);
+            if n > 0 {
+                eprintln!("({n} more panics since the last message were not printed)");
+            }
+        }
+    }));
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

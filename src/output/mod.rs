@@ -7,6 +7,8 @@ pub mod bank;
 pub mod feeding;
 pub mod log_throttle;
 pub mod modbus;
+pub mod modbus_guard;
 pub mod registers;
+pub mod roles;
 pub mod serial_line;
 pub mod tcp_conns;

@@ -1,16 +1,20 @@
 //! Modbus in all four roles (tokio-modbus): TCP server (default; the PLC polls), TCP client (one
 //! FC16 write of the block per update), RTU server and RTU client over a serial line.
 //!
-//! The TCP server limits its connections and closes idle ones ([`super::tcp_conns`]), and a failed
-//! accept pauses it instead of stopping it.
+//! The TCP and RTU servers frame and decode requests themselves, checking them first
+//! ([`super::modbus_guard`]: tokio-modbus 0.17 panics on some malformed FC15 frames); the TCP server limits and
+//! filters its connections and closes idle ones ([`super::tcp_conns`]), and a failed accept pauses
+//! it instead of stopping it.
 //!
 //! Every client call has a timeout (tokio-modbus has none of its own, issue #113); a lost PLC is
 //! reconnected with exponential backoff (tokio-modbus does not reconnect, #219/#309); the pipeline
 //! only ever publishes into the [`RegisterBank`] and never waits on the PLC.
 
 use super::bank::RegisterBank;
+use super::log_throttle::LogThrottle;
+use super::modbus_guard::{FrameError, MAX_PDU, RtuSplit, answer, answer_pdu, crc_ok, crc16, read_frame, rtu_split};
 use super::registers::{BLOCK_LEN, HR_WRITABLE_LEN, HR_WRITABLE_START};
-use super::tcp_conns::{Connections, TcpLimits};
+use super::tcp_conns::{Connections, GuardedStream, TcpLimits};
 use crate::capture::Backoff;
 use crate::config::{ModbusConfig, Parity};
 use std::future::Future;
@@ -24,12 +28,12 @@ use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
 #[derive(Debug, thiserror::Error)]
 pub enum ModbusError {
     /// Binding the TCP listener failed.
-    #[error("modbus tcp server: cannot listen on {addr}: {source}")]
+    #[error("modbus tcp server: cannot listen on {addr} (output.modbus.listen): {error}")]
     Bind {
         /// The address.
         addr: String,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message, not a separate cause: printed once).
+        error: std::io::Error,
     },
     /// Opening the serial device failed.
     #[error("modbus rtu: cannot open {device}: {message}")]
@@ -136,18 +140,21 @@ impl tokio_modbus::server::Service for RegisterService {
 pub async fn bind_tcp(listen: &str) -> Result<(tokio::net::TcpListener, SocketAddr), ModbusError> {
     let l = tokio::net::TcpListener::bind(listen)
         .await
-        .map_err(|source| ModbusError::Bind { addr: listen.to_string(), source })?;
-    let addr = l.local_addr().map_err(|source| ModbusError::Bind { addr: listen.to_string(), source })?;
+        .map_err(|error| ModbusError::Bind { addr: listen.to_string(), error })?;
+    let addr = l.local_addr().map_err(|error| ModbusError::Bind { addr: listen.to_string(), error })?;
     Ok((l, addr))
 }
 
-/// Serves Modbus TCP on `listener` until `shutdown` resolves, within `limits` (connection limit,
-/// idle timeout: [`super::tcp_conns`]).
+/// Serves Modbus TCP on `listener` until `shutdown` resolves, within `limits` (allow list,
+/// connection limits, idle timeout: [`super::tcp_conns`]).
+///
+/// Framing and request decoding are this crate's own ([`super::modbus_guard`]): malformed
+/// requests get exception 03 and never reach tokio-modbus's decoder (upstream issue 298). Each
+/// connection is its own task; a panic in one is counted and logged at most once per 10 s.
 ///
 /// A failed accept (the process out of file descriptors, say) never stops the server: it is
-/// counted, logged, and accepting resumes after a pause (backoff 0.1 s doubling to 5 s).
-/// tokio-modbus ends its accept loop on the first such error and closes the connections it serves,
-/// so those PLCs reconnect once it resumes.
+/// counted, logged, and accepting resumes after a pause (backoff 0.1 s doubling to 5 s); the
+/// connections already open are served meanwhile.
 pub async fn serve_tcp(
     listener: tokio::net::TcpListener,
     bank: Arc<RegisterBank>,
@@ -155,36 +162,111 @@ pub async fn serve_tcp(
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) {
     let conns = Connections::new(limits, bank.clone());
-    let server = tokio_modbus::server::tcp::Server::new(listener);
-    let service_bank = bank.clone();
-    let on_connected = move |stream: tokio::net::TcpStream, addr: SocketAddr| {
-        let transport = conns.admit(stream, addr);
-        let service = RegisterService::new(service_bank.clone(), None);
-        std::future::ready(Ok(Some((service, transport))))
-    };
-    let on_err = |e: std::io::Error| tracing::debug!("modbus tcp connection ended: {e}");
+    let mut tasks = tokio::task::JoinSet::new();
+    let mut panic_log = LogThrottle::new(TASK_LOG_PERIOD);
+    let mut refused_log = LogThrottle::new(TASK_LOG_PERIOD);
     let mut shutdown = std::pin::pin!(shutdown);
     let mut backoff = Backoff::new(Duration::from_millis(100), Duration::from_secs(5));
     loop {
-        let started = tokio::time::Instant::now();
         tokio::select! {
-            res = server.serve(&on_connected, on_err) => {
-                let e = match res {
-                    Ok(()) => std::io::Error::other("accept loop ended"),
-                    Err(e) => e,
-                };
-                if started.elapsed() >= Duration::from_secs(5) {
-                    backoff.reset();
-                }
-                let pause = backoff.next_delay();
-                bank.note_tcp_accept_error();
-                tracing::warn!("modbus tcp server: accept failed: {e}; accepting again in {:.1} s", pause.as_secs_f64());
-                tokio::select! {
-                    _ = tokio::time::sleep(pause) => {},
-                    () = &mut shutdown => return,
+            () = &mut shutdown => return, // dropping the JoinSet aborts the connection tasks
+            Some(done) = tasks.join_next(), if !tasks.is_empty() => {
+                if let Err(e) = done
+                    && e.is_panic()
+                {
+                    note_panic(&bank, &mut panic_log, "modbus tcp connection", e.into_panic());
                 }
             }
-            () = &mut shutdown => return,
+            accepted = listener.accept() => match accepted {
+                Ok((stream, peer)) => {
+                    backoff.reset();
+                    if !conns.permits(peer) {
+                        bank.note_tcp_refused();
+                        if let Some(n) = refused_log.allow(tokio::time::Instant::now()) {
+                            tracing::warn!("modbus tcp: connection from {peer} refused (not in output.modbus.allow; {n} more since the last message)");
+                        }
+                        drop(stream);
+                        continue;
+                    }
+                    let _ = stream.set_nodelay(true);
+                    tasks.spawn(serve_connection(conns.admit(stream, peer), bank.clone()));
+                }
+                Err(e) => {
+                    let pause = backoff.next_delay();
+                    bank.note_tcp_accept_error();
+                    tracing::warn!("modbus tcp server: accept failed: {e}; accepting again in {:.1} s", pause.as_secs_f64());
+                    tokio::select! {
+                        _ = tokio::time::sleep(pause) => {},
+                        () = &mut shutdown => return,
+                    }
+                }
+            },
+        }
+    }
+}
+
+/// At most one panic / refusal message per this period (the bank counts each).
+const TASK_LOG_PERIOD: Duration = Duration::from_secs(10);
+
+/// A write of one answer taking longer than this (a peer that does not read) ends the connection.
+const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
+
+fn note_panic(bank: &RegisterBank, log: &mut LogThrottle, what: &str, p: Box<dyn std::any::Any + Send>) {
+    bank.note_task_panic();
+    if let Some(n) = log.allow(tokio::time::Instant::now()) {
+        let msg = p
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_string())
+            .or_else(|| p.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "(no message)".into());
+        tracing::error!(
+            "{what} task panicked: {msg} ({n} more since the last message; {} in all)",
+            bank.counters().task_panics
+        );
+    }
+}
+
+/// Serves one TCP connection: frame, decode (checked), answer, until the peer closes, the idle
+/// timeout, eviction, or a frame that cannot be framed.
+async fn serve_connection(mut stream: GuardedStream, bank: Arc<RegisterBank>) {
+    use tokio::io::AsyncWriteExt as _;
+    let service = RegisterService::new(bank.clone(), None);
+    let mut buf = Vec::with_capacity(MAX_PDU);
+    let mut out = Vec::with_capacity(MAX_PDU + 7);
+    loop {
+        let frame = match read_frame(&mut stream, std::mem::take(&mut buf)).await {
+            Ok(f) => f,
+            Err(FrameError::Header { protocol, length }) => {
+                bank.note_tcp_bad_frame();
+                tracing::debug!(
+                    "modbus tcp {}: bad MBAP header (protocol {protocol}, length {length}); closing",
+                    stream.peer()
+                );
+                return;
+            }
+            Err(FrameError::Io(e)) => {
+                tracing::debug!("modbus tcp connection ended: {e}");
+                return;
+            }
+        };
+        let exception = answer(&frame, |req| service.handle(req), &mut out);
+        bank.note_request(exception);
+        stream.note_request(!exception);
+        buf = frame.pdu;
+        match tokio::time::timeout(WRITE_TIMEOUT, stream.write_all(&out)).await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => {
+                tracing::debug!("modbus tcp connection ended: {e}");
+                return;
+            }
+            Err(_) => {
+                tracing::debug!(
+                    "modbus tcp {}: answer not read for {} s; closing",
+                    stream.peer(),
+                    WRITE_TIMEOUT.as_secs()
+                );
+                return;
+            }
         }
     }
 }
@@ -208,22 +290,113 @@ pub fn open_serial(cfg: &ModbusConfig) -> Result<tokio_serial::SerialStream, Mod
         .map_err(|e| ModbusError::Serial { device: cfg.serial_device.clone(), message: e.to_string() })
 }
 
-/// Serves Modbus RTU on an opened serial stream (answers only `unit_id`) until `shutdown`.
+/// Serves Modbus RTU on an opened serial stream (answers only `unit_id`; broadcasts to unit 0 are
+/// carried out without an answer) until `shutdown`.
 pub async fn serve_rtu(
-    serial: tokio_serial::SerialStream,
+    mut serial: tokio_serial::SerialStream,
     bank: Arc<RegisterBank>,
     unit_id: u8,
-    shutdown: impl Future<Output = ()> + Send + Sync + 'static,
+    shutdown: impl Future<Output = ()> + Send + 'static,
 ) {
-    let server = tokio_modbus::server::rtu::Server::new(serial);
-    let svc = RegisterService::new(bank, Some(unit_id));
-    if let Err(e) = server.serve_until(svc, shutdown).await {
+    let shutdown = std::pin::pin!(shutdown);
+    if let Err(e) = rtu_loop(&mut serial, &bank, unit_id, shutdown).await {
         tracing::error!("modbus rtu server stopped: {e}");
     }
 }
 
+/// Silence that ends a frame whose length its function code does not tell (and flushes noise).
+/// Far above the 3.5 character times of the spec: USB RS-485 adapters deliver bytes in bursts.
+const RTU_GAP: Duration = Duration::from_millis(50);
+
+/// The RTU server loop, with this crate's own framing and checked decoding
+/// ([`super::modbus_guard`]; tokio-modbus's RTU decoder panics on the same FC15 frames as its TCP
+/// one). `Ok(true)`: stopped by `shutdown`; `Ok(false)`: the port reached its end.
+async fn rtu_loop<S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin>(
+    port: &mut S,
+    bank: &Arc<RegisterBank>,
+    unit_id: u8,
+    mut shutdown: std::pin::Pin<&mut impl Future<Output = ()>>,
+) -> std::io::Result<bool> {
+    use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+    let service = RegisterService::new(bank.clone(), Some(unit_id));
+    let mut buf: Vec<u8> = Vec::with_capacity(512);
+    let mut chunk = [0u8; 256];
+    let mut pdu = Vec::with_capacity(MAX_PDU);
+    let mut out = Vec::with_capacity(MAX_PDU + 3);
+    loop {
+        let gap = !buf.is_empty();
+        tokio::select! {
+            () = &mut shutdown => return Ok(true),
+            r = port.read(&mut chunk) => match r? {
+                0 => return Ok(false),
+                n => buf.extend_from_slice(&chunk[..n]),
+            },
+            () = tokio::time::sleep(RTU_GAP), if gap => {
+                // Silence: whatever is left is one frame of a length only the silence tells, or noise.
+                while buf.len() >= 4 {
+                    match rtu_split(&buf) {
+                        RtuSplit::Frame(n) => { rtu_answer(&buf[..n], &service, bank, unit_id, &mut pdu, &mut out); buf.drain(..n); }
+                        RtuSplit::NeedMore if crc_ok(&buf) => { rtu_answer(&buf, &service, bank, unit_id, &mut pdu, &mut out); buf.clear(); }
+                        RtuSplit::NeedMore | RtuSplit::Skip => { buf.remove(0); }
+                    }
+                    if !out.is_empty() { port.write_all(&out).await?; out.clear(); }
+                }
+                buf.clear();
+                continue;
+            }
+        }
+        loop {
+            match rtu_split(&buf) {
+                RtuSplit::Frame(n) => {
+                    rtu_answer(&buf[..n], &service, bank, unit_id, &mut pdu, &mut out);
+                    buf.drain(..n);
+                    if !out.is_empty() {
+                        port.write_all(&out).await?;
+                        out.clear();
+                    }
+                }
+                RtuSplit::Skip => {
+                    buf.remove(0);
+                }
+                RtuSplit::NeedMore => break,
+            }
+        }
+        if buf.len() > 2 * (MAX_PDU + 3) {
+            buf.clear(); // noise that never framed
+        }
+    }
+}
+
+/// Answers one CRC-checked RTU request `adu` into `out` (left empty when no answer is due: another
+/// unit, or a broadcast).
+fn rtu_answer(
+    adu: &[u8],
+    service: &RegisterService,
+    bank: &RegisterBank,
+    unit_id: u8,
+    pdu: &mut Vec<u8>,
+    out: &mut Vec<u8>,
+) {
+    out.clear();
+    let unit = adu[0];
+    if unit != unit_id && unit != 0 {
+        return;
+    }
+    let exception = answer_pdu(&adu[1..adu.len() - 2], |req| service.handle(req), pdu);
+    bank.note_request(exception);
+    if unit == 0 {
+        return;
+    }
+    out.push(unit);
+    out.extend_from_slice(pdu);
+    let crc = crc16(out);
+    out.extend_from_slice(&crc);
+}
+
 /// RTU server role with recovery: opens `cfg.serial_device`, serves, and on an open failure or a
 /// lost device (USB RS-485 adapter unplugged) logs, waits with backoff and reopens, until `shutdown`.
+/// Each opened port is served in its own task: a panic there is counted, logged at most once per
+/// 10 s, and the port reopened.
 pub async fn run_rtu_server(
     cfg: ModbusConfig,
     bank: Arc<RegisterBank>,
@@ -231,33 +404,26 @@ pub async fn run_rtu_server(
 ) {
     let mut backoff =
         Backoff::new(Duration::from_millis(cfg.reconnect_min_ms), Duration::from_millis(cfg.reconnect_max_ms));
+    let mut panic_log = LogThrottle::new(TASK_LOG_PERIOD);
     while !*shutdown.borrow() {
         match open_serial(&cfg) {
-            Ok(port) => {
+            Ok(mut port) => {
                 backoff.reset();
                 tracing::info!("modbus rtu server on {} unit {}", cfg.serial_device, cfg.unit_id);
                 let mut rx = shutdown.clone();
-                let stop = async move {
-                    let _ = rx.wait_for(|s| *s).await;
-                };
-                let server = tokio_modbus::server::rtu::Server::new(port);
-                let svc = RegisterService::new(bank.clone(), Some(cfg.unit_id));
-                // serve_until needs a Sync future; run the stop signal through a oneshot.
-                let (tx, orx) = tokio::sync::oneshot::channel::<()>();
-                let relay = tokio::spawn(async move {
-                    stop.await;
-                    let _ = tx.send(());
+                let (b, unit) = (bank.clone(), cfg.unit_id);
+                let serving = tokio::spawn(async move {
+                    let stop = std::pin::pin!(async move {
+                        let _ = rx.wait_for(|s| *s).await;
+                    });
+                    rtu_loop(&mut port, &b, unit, stop).await
                 });
-                let res = server
-                    .serve_until(svc, async move {
-                        let _ = orx.await;
-                    })
-                    .await;
-                relay.abort();
-                match res {
-                    Ok(tokio_modbus::server::Terminated::Aborted) => return,
-                    Ok(_) => tracing::warn!("modbus rtu {}: port closed", cfg.serial_device),
-                    Err(e) => tracing::warn!("modbus rtu {}: {e}", cfg.serial_device),
+                match serving.await {
+                    Ok(Ok(true)) => return,
+                    Ok(Ok(false)) => tracing::warn!("modbus rtu {}: port closed", cfg.serial_device),
+                    Ok(Err(e)) => tracing::warn!("modbus rtu {}: {e}", cfg.serial_device),
+                    Err(e) if e.is_panic() => note_panic(&bank, &mut panic_log, "modbus rtu server", e.into_panic()),
+                    Err(_) => return,
                 }
             }
             Err(e) => tracing::warn!("{e}"),

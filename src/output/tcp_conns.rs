@@ -1,6 +1,9 @@
-//! Connection management of the Modbus TCP server: at most `max_connections` at once, each closed
-//! after `idle_timeout` without a request, and the least recently active one closed to make room for
-//! a new one.
+//! Connection management of the Modbus TCP server: at most `max_connections` at once and
+//! `max_per_peer` from one address, each closed after `idle_timeout` without a complete request,
+//! and one closed to make room for a new one: first those that never had a request answered
+//! (a port scanner, an idle connection flood), then the least recently active. A PLC polling
+//! normally is therefore never closed for connections that only connect, and a flood from one
+//! address only ever evicts that address's own connections once it reaches its per-peer limit.
 //!
 //! Modbus Messaging on TCP/IP Implementation Guide v1.0b, 4.2.1: a server limits its connections
 //! and, when the limit is reached, closes the oldest unused connection rather than refusing the new
@@ -10,6 +13,7 @@
 
 use super::bank::RegisterBank;
 use super::log_throttle::LogThrottle;
+use crate::config::allow::AllowList;
 use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
@@ -22,13 +26,20 @@ use tokio::net::TcpStream;
 use tokio::sync::oneshot;
 use tokio::time::{Instant, Sleep};
 
-/// Limits of the Modbus TCP server (`[output.modbus] max_connections`, `idle_timeout_ms`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Limits of the Modbus TCP server (`[output.modbus] max_connections`, `max_connections_per_peer`,
+/// `idle_timeout_ms`, `allow`).
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct TcpLimits {
-    /// Connections served at once; a new one beyond this closes the least recently active one.
+    /// Connections served at once; a new one beyond this closes another (see the module docs).
     pub max_connections: usize,
-    /// A connection with no request for this long is closed; `None` keeps idle connections open.
+    /// Connections served at once from one IP address; a new one beyond this closes one of that
+    /// address's own.
+    pub max_per_peer: usize,
+    /// A connection with no complete request for this long is closed; `None` keeps idle
+    /// connections open. Bytes that do not complete a request do not count.
     pub idle_timeout: Option<Duration>,
+    /// Addresses allowed to connect (empty = all); others are closed at accept and counted.
+    pub allow: AllowList,
 }
 
 impl TcpLimits {
@@ -36,14 +47,22 @@ impl TcpLimits {
     pub fn from_config(m: &crate::config::ModbusConfig) -> Self {
         Self {
             max_connections: m.max_connections as usize,
+            max_per_peer: m.max_connections_per_peer as usize,
             idle_timeout: (m.idle_timeout_ms > 0).then(|| Duration::from_millis(m.idle_timeout_ms)),
+            // Checked by `Config::validate`; a bad entry here would allow nobody rather than everyone.
+            allow: AllowList::parse(&m.allow).unwrap_or_else(|_| AllowList::nobody()),
         }
     }
 }
 
 impl Default for TcpLimits {
     fn default() -> Self {
-        Self { max_connections: 8, idle_timeout: Some(Duration::from_secs(60)) }
+        Self {
+            max_connections: 8,
+            max_per_peer: 4,
+            idle_timeout: Some(Duration::from_secs(60)),
+            allow: AllowList::default(),
+        }
     }
 }
 
@@ -52,7 +71,16 @@ struct Entry {
     id: u64,
     peer: SocketAddr,
     last_activity: Instant,
+    /// Whether a request on it has been answered without an exception.
+    proven: bool,
     close: oneshot::Sender<()>,
+}
+
+impl Entry {
+    /// Eviction order: never-answered connections first, then the least recently active.
+    fn eviction_key(&self) -> (bool, Instant) {
+        (self.proven, self.last_activity)
+    }
 }
 
 /// At most one eviction warning per this period; the bank counts every eviction.
@@ -90,31 +118,35 @@ impl Connections {
         self.lock().open.len()
     }
 
-    /// Registers an accepted stream, closing the least recently active connection first when the
-    /// table is full, and returns the stream wrapped so that it reports activity and obeys the idle
-    /// timeout and eviction.
+    /// Whether a peer at this address may connect at all (`allow`).
+    pub fn permits(&self, peer: SocketAddr) -> bool {
+        self.limits.allow.permits(peer.ip())
+    }
+
+    /// Registers an accepted stream, first closing one connection of the same address when it is
+    /// at `max_per_peer`, then one of any address while the table is full (never-answered
+    /// connections first, then the least recently active), and returns the stream wrapped so that
+    /// it obeys the idle timeout and eviction.
     pub fn admit(&self, stream: TcpStream, peer: SocketAddr) -> GuardedStream {
         let (tx, rx) = oneshot::channel();
         let now = Instant::now();
         let id = {
             let mut t = self.lock();
+            let per_peer = self.limits.max_per_peer.clamp(1, self.limits.max_connections.max(1));
+            if t.open.iter().filter(|e| e.peer.ip() == peer.ip()).count() >= per_peer
+                && let Some(i) = (0..t.open.len())
+                    .filter(|&i| t.open[i].peer.ip() == peer.ip())
+                    .min_by_key(|&i| t.open[i].eviction_key())
+            {
+                self.evict(&mut t, i, peer, now, "per-address limit");
+            }
             while t.open.len() >= self.limits.max_connections.max(1) {
-                let Some(oldest) = (0..t.open.len()).min_by_key(|&i| t.open[i].last_activity) else { break };
-                let e = t.open.swap_remove(oldest);
-                if let Some(held_back) = t.eviction_log.allow(now) {
-                    tracing::warn!(
-                        "modbus tcp: {} connections open (the limit); closing the least recently active, {} (idle {:.1} s), for {peer} ({held_back} more evictions since the last message)",
-                        self.limits.max_connections,
-                        e.peer,
-                        now.duration_since(e.last_activity).as_secs_f64()
-                    );
-                }
-                let _ = e.close.send(());
-                self.bank.note_tcp_evicted();
+                let Some(i) = (0..t.open.len()).min_by_key(|&i| t.open[i].eviction_key()) else { break };
+                self.evict(&mut t, i, peer, now, "connection limit");
             }
             let id = t.next_id;
             t.next_id += 1;
-            t.open.push(Entry { id, peer, last_activity: now, close: tx });
+            t.open.push(Entry { id, peer, last_activity: now, proven: false, close: tx });
             self.bank.set_tcp_open(t.open.len());
             id
         };
@@ -129,10 +161,25 @@ impl Connections {
         }
     }
 
-    fn touch(&self, id: u64) {
+    fn evict(&self, t: &mut Table, i: usize, peer: SocketAddr, now: Instant, why: &str) {
+        let e = t.open.swap_remove(i);
+        if let Some(held_back) = t.eviction_log.allow(now) {
+            tracing::warn!(
+                "modbus tcp: {why} reached; closing {} ({}, idle {:.1} s) for {peer} ({held_back} more evictions since the last message)",
+                e.peer,
+                if e.proven { "least recently active" } else { "no request answered yet" },
+                now.duration_since(e.last_activity).as_secs_f64()
+            );
+        }
+        let _ = e.close.send(());
+        self.bank.note_tcp_evicted();
+    }
+
+    fn touch(&self, id: u64, answered: bool) {
         let now = Instant::now();
         if let Some(e) = self.lock().open.iter_mut().find(|e| e.id == id) {
             e.last_activity = now;
+            e.proven |= answered;
         }
     }
 
@@ -156,7 +203,7 @@ enum Eviction {
     Never,
 }
 
-/// A server-side TCP stream that ends with an error when it is idle for longer than the timeout or
+/// A server-side TCP stream that ends with an error when no request completes within the timeout or
 /// when [`Connections`] evicts it; dropping it unregisters the connection.
 #[derive(Debug)]
 pub struct GuardedStream {
@@ -169,6 +216,21 @@ pub struct GuardedStream {
 }
 
 impl GuardedStream {
+    /// Notes a complete request on this connection: restarts the idle timeout and marks the
+    /// connection active; `answered` (no exception) also protects it from eviction before
+    /// connections that never had a request answered.
+    pub fn note_request(&mut self, answered: bool) {
+        if let Some((d, sleep)) = self.idle.as_mut() {
+            sleep.as_mut().reset(Instant::now() + *d);
+        }
+        self.conns.touch(self.id, answered);
+    }
+
+    /// The peer's address.
+    pub fn peer(&self) -> SocketAddr {
+        self.peer
+    }
+
     /// `Some(error)` once this connection was evicted for a newer one (and on every poll after).
     fn evicted(&mut self, cx: &mut Context<'_>) -> Option<io::Error> {
         if let Eviction::Watching(rx) = &mut self.eviction {
@@ -195,18 +257,10 @@ impl AsyncRead for GuardedStream {
         if let Some(e) = this.evicted(cx) {
             return Poll::Ready(Err(e));
         }
-        let before = buf.filled().len();
+        // Bytes alone do not restart the idle timeout (a peer trickling one byte at a time would
+        // keep its connection forever): only a complete request does (`note_request`).
         match Pin::new(&mut this.stream).poll_read(cx, buf) {
-            Poll::Ready(Ok(())) => {
-                if buf.filled().len() > before {
-                    if let Some((d, sleep)) = this.idle.as_mut() {
-                        sleep.as_mut().reset(Instant::now() + *d);
-                    }
-                    this.conns.touch(this.id);
-                }
-                Poll::Ready(Ok(()))
-            }
-            Poll::Ready(Err(e)) => Poll::Ready(Err(e)),
+            Poll::Ready(r) => Poll::Ready(r),
             Poll::Pending => {
                 let Some((d, sleep)) = this.idle.as_mut() else { return Poll::Pending };
                 if sleep.as_mut().poll(cx).is_pending() {

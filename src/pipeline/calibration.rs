@@ -32,16 +32,28 @@ pub struct Calibration {
 impl Calibration {
     /// The calibration a configuration asks for: `camera.calibration` when set, else a recorded
     /// source's own `meta.json`, else none (a camera without calibration runs uncalibrated).
+    /// A calibration that cannot give a metric fit (fewer than two reference objects) is an error:
+    /// the box would track fish forever and never report a speed.
     pub fn for_config(cfg: &Config) -> Result<Option<Self>, String> {
         let configured = &cfg.camera.calibration;
-        if !configured.as_os_str().is_empty() {
-            return Self::load(configured).map(Some).map_err(|e| format!("camera.calibration: {e}"));
+        let (path, key) = if !configured.as_os_str().is_empty() {
+            (configured.clone(), "camera.calibration")
+        } else {
+            let meta = cfg.source.path.join("meta.json");
+            if cfg.source.path.starts_with("/dev") || !meta.is_file() {
+                return Ok(None);
+            }
+            (meta, "the recording's calibration")
+        };
+        let c = Self::load(&path).map_err(|e| format!("{key}: {e}"))?;
+        if c.references.len() < 2 {
+            return Err(format!(
+                "{key}: {}: reference_objects: {} reference object(s); the metric depth fit needs at least 2",
+                path.display(),
+                c.references.len()
+            ));
         }
-        let meta = cfg.source.path.join("meta.json");
-        if cfg.source.path.starts_with("/dev") || !meta.is_file() {
-            return Ok(None);
-        }
-        Self::load(&meta).map(Some).map_err(|e| format!("the recording's calibration: {e}"))
+        Ok(Some(c))
     }
 
     /// Reads and checks a calibration file; the error names the file and the problem.

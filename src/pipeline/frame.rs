@@ -56,6 +56,36 @@ impl Frame {
 }
 
 impl Frame {
+    /// The image size the bytes say, read from the JPEG header only (nothing is decoded); the
+    /// source's size for raw formats.
+    pub fn encoded_dimensions(&self) -> Result<(u32, u32), String> {
+        match self.format {
+            PixelFormat::Jpeg => {
+                image::ImageReader::with_format(std::io::Cursor::new(&self.data), image::ImageFormat::Jpeg)
+                    .into_dimensions()
+                    .map_err(|e| e.to_string())
+            }
+            PixelFormat::Yuyv | PixelFormat::Gray8 => Ok((self.width, self.height)),
+        }
+    }
+
+    /// A frame larger than `max_pixels` (by its header, before any decoding) is a bad frame: a
+    /// 4000x4000 JPEG in an MJPEG stream would otherwise be decoded in full (+50 MB, kept).
+    /// `max_pixels = 0`: 4 x the larger of `configured` (width, height) and the source's own size.
+    pub fn check_size(&self, max_pixels: u64, configured: (u32, u32)) -> Result<(), String> {
+        let limit = if max_pixels > 0 {
+            max_pixels
+        } else {
+            4 * (u64::from(configured.0) * u64::from(configured.1)).max(u64::from(self.width) * u64::from(self.height))
+        };
+        let (w, h) = self.encoded_dimensions()?;
+        let n = u64::from(w) * u64::from(h);
+        if n > limit {
+            return Err(format!("frame {}: {w}x{h} px is more than source.max_pixels ({limit} px)", self.seq));
+        }
+        Ok(())
+    }
+
     /// Decodes to packed RGB8 into `out` (resized to `width * height * 3`; reuse it across frames
     /// so the output buffer is not reallocated). JPEG: decoded (grey JPEGs are expanded); YUYV:
     /// BT.601 limited-range conversion; grey: replicated. Returns (width, height).
@@ -172,5 +202,24 @@ mod tests {
         assert_eq!(f.to_luma().map(|i| i.into_raw()), Ok(vec![10, 20]));
         let short = Frame { data: vec![1, 2], ..f };
         assert!(short.to_luma().is_err());
+    }
+
+    #[test]
+    fn oversized_frames_are_found_from_the_header() {
+        let mut jpg = Vec::new();
+        let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpg, 80);
+        let img: image::DynamicImage = image::GrayImage::from_pixel(64, 48, image::Luma([90])).into();
+        img.write_with_encoder(enc).expect("encode");
+        // The source says 8x4 (a rogue frame in its stream is 64x48): more than 4 x 32 px.
+        let f = frame(PixelFormat::Jpeg, 8, 4, jpg.clone());
+        assert_eq!(f.encoded_dimensions(), Ok((64, 48)));
+        let e = f.check_size(0, (8, 4)).expect_err("too large");
+        assert!(e.contains("64x48") && e.contains("source.max_pixels"), "{e}");
+        assert!(f.check_size(0, (32, 24)).is_ok(), "4 x the configured size");
+        assert!(f.check_size(64 * 48, (8, 4)).is_ok(), "an explicit limit");
+        assert!(f.check_size(64 * 48 - 1, (8, 4)).is_err());
+        let native = frame(PixelFormat::Jpeg, 64, 48, jpg);
+        assert!(native.check_size(0, (8, 4)).is_ok(), "the source's own size counts");
+        assert!(frame(PixelFormat::Jpeg, 8, 4, vec![0xFF, 0xD8]).check_size(0, (8, 4)).is_err(), "no header");
     }
 }

@@ -13,11 +13,12 @@
 
 pub mod health;
 pub mod publish;
+pub mod signals;
 
 use crate::capture::{Backoff, CaptureError, FrameQueue, FrameSource};
-use crate::config::{Config, ModbusMode};
+use crate::config::Config;
 use crate::output::bank::RegisterBank;
-use crate::output::modbus::{self, ClientSettings, ClientTarget, ModbusError};
+use crate::output::roles::RoleError;
 use crate::pipeline::{Calibration, FishPipeline, Pipeline};
 use health::Shared;
 use publish::Publisher;
@@ -29,9 +30,9 @@ use tracing::Level;
 /// Errors starting the daemon (everything after start-up is logged and retried instead).
 #[derive(Debug, thiserror::Error)]
 pub enum ServiceError {
-    /// A Modbus role could not start.
+    /// A Modbus role (or the serial line) could not start.
     #[error(transparent)]
-    Modbus(#[from] ModbusError),
+    Roles(#[from] RoleError),
     /// The frame source could not be opened.
     #[error("source: {0}")]
     Capture(#[from] CaptureError),
@@ -42,12 +43,12 @@ pub enum ServiceError {
     #[error("--series: {0}")]
     Series(String),
     /// A thread could not be spawned.
-    #[error("cannot spawn {what}: {source}")]
+    #[error("cannot spawn {what}: {error}")]
     Spawn {
         /// Which thread.
         what: &'static str,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message, not a separate cause: printed once).
+        error: std::io::Error,
     },
 }
 
@@ -117,10 +118,16 @@ fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
 }
 
 /// Runs the capture loop, restarting it (after the reconnect backoff) if a source panics.
-fn capture_thread(mut source: Box<dyn FrameSource>, queue: Arc<FrameQueue>, shared: Arc<Shared>, backoff: Backoff) {
+fn capture_thread(
+    mut source: Box<dyn FrameSource>,
+    queue: Arc<FrameQueue>,
+    shared: Arc<Shared>,
+    backoff: Backoff,
+    size: SizeLimit,
+) {
     loop {
         let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            capture_loop(&mut source, &queue, &shared, backoff);
+            capture_loop(&mut source, &queue, &shared, backoff, size);
         }));
         match run {
             Ok(()) => return,
@@ -143,14 +150,38 @@ fn capture_thread(mut source: Box<dyn FrameSource>, queue: Arc<FrameQueue>, shar
     }
 }
 
-fn capture_loop(source: &mut Box<dyn FrameSource>, queue: &FrameQueue, shared: &Shared, mut backoff: Backoff) {
+/// `source.max_pixels` and the configured size ([`crate::capture::Frame::check_size`]).
+#[derive(Debug, Clone, Copy)]
+struct SizeLimit {
+    max_pixels: u64,
+    configured: (u32, u32),
+}
+
+fn capture_loop(
+    source: &mut Box<dyn FrameSource>,
+    queue: &FrameQueue,
+    shared: &Shared,
+    mut backoff: Backoff,
+    size: SizeLimit,
+) {
     let mut window_start = Instant::now();
     let mut window_frames = 0u32;
+    let mut oversized = 0u64;
     let paced = source.paced();
     while !shared.stopping() {
         match source.next_frame(queue.take_buffer()) {
             Ok(frame) => {
                 backoff.reset();
+                // Checked from the header before anything decodes it: a bad frame, not a decode.
+                if let Err(e) = frame.check_size(size.max_pixels, size.configured) {
+                    oversized += 1;
+                    shared.with_health(|h| h.capture_errors += 1);
+                    if oversized == 1 || oversized.is_multiple_of(100) {
+                        shared.log(Level::WARN, format!("bad frame #{oversized} dropped: {e}"));
+                    }
+                    queue.recycle(frame.data);
+                    continue;
+                }
                 let now = frame.arrived;
                 if paced {
                     if let Some(old) = queue.push(frame) {
@@ -333,39 +364,6 @@ fn pipeline_loop(mut c: PipelineCtx) {
     let _ = c.finished.send(true);
 }
 
-fn serial_line_loop(device: String, baud: u32, rx: std::sync::mpsc::Receiver<String>, shared: Arc<Shared>) {
-    let mut port: Option<Box<dyn serialport::SerialPort>> = None;
-    let mut backoff = Backoff::new(Duration::from_millis(500), Duration::from_secs(30));
-    let mut retry_at = Instant::now();
-    loop {
-        let line = match rx.recv_timeout(Duration::from_millis(200)) {
-            Ok(l) => l,
-            Err(std::sync::mpsc::RecvTimeoutError::Timeout) if shared.stopping() => return,
-            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => continue,
-            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return,
-        };
-        if port.is_none() && Instant::now() >= retry_at {
-            match serialport::new(&device, baud).timeout(Duration::from_millis(200)).open() {
-                Ok(p) => {
-                    backoff.reset();
-                    port = Some(p);
-                }
-                Err(e) => {
-                    let d = backoff.next_delay();
-                    retry_at = Instant::now() + d;
-                    shared.log(Level::WARN, format!("serial line {device}: {e}; retry in {} ms", d.as_millis()));
-                }
-            }
-        }
-        if let Some(p) = port.as_mut()
-            && let Err(e) = p.write_all(line.as_bytes()).and_then(|()| p.flush())
-        {
-            shared.log(Level::WARN, format!("serial line {device}: write failed: {e}"));
-            port = None;
-        }
-    }
-}
-
 impl Daemon {
     /// Starts every part of the daemon. Must be called inside a tokio runtime. Start-up errors (bind,
     /// serial open of an RTU server) are returned; later failures are logged and retried.
@@ -389,75 +387,11 @@ impl Daemon {
         let _ = publisher.lock().unwrap_or_else(|p| p.into_inner()).publish(&shared, Instant::now(), false);
 
         let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
-        let mut server_stops = Vec::new();
-        let mut server_tasks = Vec::new();
-        let mut client_task = None;
-        let m = &cfg.output.modbus;
-        let mut modbus_addr = None;
-        match m.mode {
-            ModbusMode::Off => {}
-            ModbusMode::TcpServer => {
-                let (listener, addr) = modbus::bind_tcp(&m.listen).await?;
-                modbus_addr = Some(addr);
-                let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-                server_stops.push(tx);
-                server_tasks.push(tokio::spawn(modbus::serve_tcp(
-                    listener,
-                    bank.clone(),
-                    crate::output::tcp_conns::TcpLimits::from_config(m),
-                    async move {
-                        let _ = rx.await;
-                    },
-                )));
-                shared.log(Level::INFO, format!("modbus tcp server on {addr}"));
-            }
-            ModbusMode::RtuServer => {
-                // A missing RS-485 adapter is retried with backoff, not fatal.
-                server_tasks.push(tokio::spawn(modbus::run_rtu_server(m.clone(), bank.clone(), stop_rx.clone())));
-                shared.log(Level::INFO, format!("modbus rtu server on {} unit {}", m.serial_device, m.unit_id));
-            }
-            ModbusMode::TcpClient | ModbusMode::RtuClient => {
-                let target = if m.mode == ModbusMode::TcpClient {
-                    ClientTarget::Tcp(m.peer.clone()) // resolved at each connect: DNS changes are picked up
-                } else {
-                    ClientTarget::Rtu(m.clone())
-                };
-                let settings = ClientSettings {
-                    target,
-                    unit_id: m.unit_id,
-                    base_address: m.base_address,
-                    timeout: Duration::from_millis(m.timeout_ms),
-                    backoff: Backoff::new(
-                        Duration::from_millis(m.reconnect_min_ms),
-                        Duration::from_millis(m.reconnect_max_ms),
-                    ),
-                };
-                client_task = Some(tokio::spawn(modbus::run_client(settings, bank.clone(), stop_rx.clone())));
-                shared.log(
-                    Level::INFO,
-                    format!(
-                        "modbus client ({:?}) to {}",
-                        m.mode,
-                        if m.mode == ModbusMode::TcpClient { &m.peer } else { &m.serial_device }
-                    ),
-                );
-            }
-        }
-
-        let mut other_threads = Vec::new();
-        let serial_tx = if cfg.output.serial.enabled {
-            let (tx, rx) = std::sync::mpsc::sync_channel::<String>(4);
-            let (dev, baud, sh) = (cfg.output.serial.device.clone(), cfg.output.serial.baud, shared.clone());
-            other_threads.push(
-                std::thread::Builder::new()
-                    .name("fme-serial-line".into())
-                    .spawn(move || serial_line_loop(dev, baud, rx, sh))
-                    .map_err(|source| ServiceError::Spawn { what: "serial line", source })?,
-            );
-            Some(tx)
-        } else {
-            None
-        };
+        let roles = crate::output::roles::spawn(&cfg, &bank, &shared, stop_rx).await?;
+        let modbus_addr = roles.modbus_addr;
+        let (server_stops, server_tasks, client_task) = (roles.server_stops, roles.server_tasks, roles.client_task);
+        let serial_tx = roles.serial_tx;
+        let mut other_threads: Vec<_> = roles.serial_thread.into_iter().collect();
         if cfg.console.enabled {
             let (dev, baud, echo, sh) =
                 (cfg.console.device.clone(), cfg.console.baud, cfg.console.echo, shared.clone());
@@ -465,7 +399,7 @@ impl Daemon {
                 std::thread::Builder::new()
                     .name("fme-console".into())
                     .spawn(move || crate::console::run_on_device(&dev, baud, echo, &sh))
-                    .map_err(|source| ServiceError::Spawn { what: "console", source })?,
+                    .map_err(|error| ServiceError::Spawn { what: "console", error })?,
             );
         }
 
@@ -475,11 +409,12 @@ impl Daemon {
             Duration::from_millis(cfg.source.reconnect_max_ms),
         );
         let (q, sh) = (queue.clone(), shared.clone());
+        let size = SizeLimit { max_pixels: cfg.source.max_pixels, configured: (cfg.source.width, cfg.source.height) };
         other_threads.push(
             std::thread::Builder::new()
                 .name("fme-capture".into())
-                .spawn(move || capture_thread(source, q, sh, backoff))
-                .map_err(|source| ServiceError::Spawn { what: "capture", source })?,
+                .spawn(move || capture_thread(source, q, sh, backoff, size))
+                .map_err(|error| ServiceError::Spawn { what: "capture", error })?,
         );
         let watchdog = if cfg.service.systemd_notify { sd_notify::watchdog_enabled() } else { None };
         let (finished_tx, finished) = tokio::sync::watch::channel(false);
@@ -499,7 +434,7 @@ impl Daemon {
             std::thread::Builder::new()
                 .name("fme-pipeline".into())
                 .spawn(move || pipeline_loop(ctx))
-                .map_err(|source| ServiceError::Spawn { what: "pipeline", source })?,
+                .map_err(|error| ServiceError::Spawn { what: "pipeline", error })?,
         );
 
         // Keepalive: with no samples (camera down, pipeline failing) the registers still update, so
@@ -560,6 +495,21 @@ impl Daemon {
     /// Shared state (health, registers, logs).
     pub fn shared(&self) -> &Arc<Shared> {
         &self.shared
+    }
+
+    /// SIGHUP: checks the calibration file again and says what it found (journal and console
+    /// `log`). The running pipeline keeps its calibration: applying a changed one needs a restart.
+    pub fn on_hangup(&self) {
+        let what = match Calibration::for_config(&self.cfg) {
+            Ok(Some(c)) => format!(
+                "{} reads OK ({} reference objects); restart fme to apply a changed calibration",
+                c.path.display(),
+                c.references.len()
+            ),
+            Ok(None) => "no calibration configured (camera.calibration)".to_string(),
+            Err(e) => format!("{e}; the running calibration is kept"),
+        };
+        self.shared.log(Level::WARN, format!("SIGHUP: not stopping; calibration check: {what}"));
     }
 
     /// The bound Modbus TCP server address (useful with port 0).
