@@ -1,5 +1,5 @@
 //! Settings of the inference stage, meant to be embedded as sections of the fme TOML file
-//! (`[infer]`, `[detector]`, `[depth]`, `[schedule]`). Every field has a default; `validate`
+//! (`[detector]`, `[depth]`, `[schedule]`). Every field has a default; `validate`
 //! names the offending key.
 
 use std::path::PathBuf;
@@ -8,32 +8,6 @@ use serde::{Deserialize, Serialize};
 
 use super::InferError;
 use super::frame::Normalize;
-use super::runtime::SessionOptions;
-
-/// Runtime-wide settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct RuntimeConfig {
-    /// Intra-op threads per session (board profile: the number of big cores). 0 = ONNX Runtime's choice.
-    pub intra_threads: usize,
-    /// Let idle ONNX Runtime worker threads spin.
-    pub spin: bool,
-    /// Explicit path of `libonnxruntime.so`; unset = the lookup order of [`super::runtime`].
-    pub library: Option<PathBuf>,
-}
-
-impl Default for RuntimeConfig {
-    fn default() -> Self {
-        Self { intra_threads: 2, spin: false, library: None }
-    }
-}
-
-impl RuntimeConfig {
-    /// The session options these settings give.
-    pub fn session_options(&self) -> SessionOptions {
-        SessionOptions { intra_threads: self.intra_threads, spin: self.spin }
-    }
-}
 
 /// The detector (Ultralytics YOLOv8/YOLO11 export convention).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

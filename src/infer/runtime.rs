@@ -64,15 +64,6 @@ pub fn environment_from(library: &Path) -> Result<&'static Environment, InferErr
     init_with(vec![(library.to_path_buf(), "configured path")])
 }
 
-/// Initialises the runtime from the `[infer]` settings: the configured library path if any, else
-/// the lookup order of this module. Call once at start-up so a missing library fails early.
-pub fn init(cfg: &super::RuntimeConfig) -> Result<&'static Environment, InferError> {
-    match &cfg.library {
-        Some(path) => environment_from(path),
-        None => environment(),
-    }
-}
-
 fn init_with(candidates: Vec<(PathBuf, &'static str)>) -> Result<&'static Environment, InferError> {
     let _guard = INIT.lock().unwrap_or_else(|e| e.into_inner());
     if let Some(env) = ENV.get() {
