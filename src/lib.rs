@@ -16,6 +16,9 @@
 //! | [`motion`] | world positions, per-fish 3D speed, swarm mean (activity index) | sec. 3.3, eq. 5 |
 //! | [`eval`], [`mot`] | speed, depth and tracking metrics against ground truth | sec. 4.5 |
 //! | [`capture`], [`output`], [`console`], [`config`], [`service`] | the edge daemon | - |
+//!
+//! Shared low-level pieces with no stage of their own: [`rng`] (the seeded generator of all
+//! synthetic data).
 
 #![warn(missing_docs)]
 
@@ -31,6 +34,7 @@ pub mod mot;
 pub mod motion;
 pub mod output;
 pub mod postprocess;
+pub mod rng;
 pub mod sequence;
 pub mod service;
 pub mod synth;
