@@ -17,11 +17,12 @@
 //! | [`eval`], [`mot`] | speed, depth and tracking metrics against ground truth | sec. 4.5 |
 //! | [`capture`], [`output`], [`console`], [`config`], [`service`] | the edge daemon | - |
 //!
-//! Shared low-level pieces with no stage of their own: [`rng`] (the seeded generator of all
-//! synthetic data).
+//! Shared low-level pieces with no stage of their own: [`assign`] (the optimal assignment solver of
+//! the tracker and the MOT metrics) and [`rng`] (the seeded generator of all synthetic data).
 
 #![warn(missing_docs)]
 
+pub mod assign;
 pub mod capture;
 pub mod cli;
 pub mod config;

@@ -45,7 +45,6 @@
 //! The paper's chosen values for its Faster R-CNN tracker (Table 2: `T_d` 50%, `T_t` 50%, `T_unt`
 //! 70%, `T_unc` 40%, `T_iou` 50%) are a point of the `fme tune` grid.
 
-pub mod assign;
 pub mod config;
 pub mod kalman;
 mod tracker;

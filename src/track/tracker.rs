@@ -1,8 +1,8 @@
 //! The multi-object tracker: fixed-capacity tracks, SORT and ByteTrack-style association.
 
-use super::assign::{FixedAssigner, UNASSIGNED};
 use super::config::{Mode, TrackerConfig};
 use super::kalman::{CvKalman, SortKalman};
+use crate::assign::{FixedAssigner, UNASSIGNED};
 use crate::geometry::PixelBox;
 use crate::units::{Metres, Seconds};
 
