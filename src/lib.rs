@@ -18,7 +18,8 @@
 //! | [`capture`], [`output`], [`console`], [`config`], [`service`] | the edge daemon | - |
 //!
 //! Shared low-level pieces with no stage of their own: [`assign`] (the optimal assignment solver of
-//! the tracker and the MOT metrics) and [`rng`] (the seeded generator of all synthetic data).
+//! the tracker and the MOT metrics), [`detection`] (what the detector produces and the tracker
+//! consumes) and [`rng`] (the seeded generator of all synthetic data).
 
 #![warn(missing_docs)]
 
@@ -27,6 +28,7 @@ pub mod capture;
 pub mod cli;
 pub mod config;
 pub mod console;
+pub mod detection;
 pub mod eval;
 pub mod geometry;
 pub mod infer;

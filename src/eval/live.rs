@@ -127,12 +127,8 @@ pub fn model_detections(
         let d = detector
             .detect(&RgbFrame::from(&img), seq.timestamp(frame))
             .map_err(|e| EvalError::Input { path: seq.frame_path(frame), msg: e.to_string() })?;
-        let dets: Vec<Detection> = d
-            .items
-            .iter()
-            .filter(|x| !footprints.covers(&x.bbox))
-            .map(|x| Detection::new(x.bbox, f64::from(x.score)))
-            .collect();
+        let dets: Vec<Detection> =
+            d.items.iter().filter(|x| !footprints.covers(&x.bbox)).map(|x| Detection::new(x.bbox, x.score)).collect();
         frame_gt.clear();
         frame_gt.extend(gt[frame as usize - 1].iter().map(|&(_, b, v)| (b, v)));
         score.add_frame(&dets, &frame_gt);

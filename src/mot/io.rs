@@ -121,13 +121,13 @@ pub fn read_file(path: &Path, opts: ReadOptions) -> Result<Vec<MotRow>, MotError
 
 /// Reads a MOTChallenge detection file (`frame,-1,x,y,w,h,score,...`) into per-frame lists for a
 /// sequence of `frames` frames (index 0 = frame 1); a row beyond the sequence is an error naming the file.
-pub fn read_detections(path: &Path, frames: u32) -> Result<Vec<Vec<crate::track::Detection>>, MotError> {
+pub fn read_detections(path: &Path, frames: u32) -> Result<Vec<Vec<crate::detection::Detection>>, MotError> {
     let rows = read_file(path, ReadOptions::default())?;
     let mut out = vec![Vec::new(); frames as usize];
     for r in rows {
         let beyond = || MotError::Beyond { path: path.to_path_buf(), frame: r.frame, frames };
         let slot = (r.frame as usize).checked_sub(1).and_then(|i| out.get_mut(i)).ok_or_else(beyond)?;
-        slot.push(crate::track::Detection::new(r.bbox, r.score));
+        slot.push(crate::detection::Detection::new(r.bbox, r.score));
     }
     Ok(out)
 }

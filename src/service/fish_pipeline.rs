@@ -271,7 +271,7 @@ impl Pipeline for FishPipeline {
                             d.items
                                 .iter()
                                 .filter(|x| !footprints.covers(&x.bbox))
-                                .map(|x| track::Detection::new(x.bbox, f64::from(x.score))),
+                                .map(|x| track::Detection::new(x.bbox, x.score)),
                         );
                         self.health.detector_ok = true;
                         self.det_rate.record(t.0);

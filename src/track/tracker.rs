@@ -3,6 +3,7 @@
 use super::config::{Mode, TrackerConfig};
 use super::kalman::{CvKalman, SortKalman};
 use crate::assign::{FixedAssigner, UNASSIGNED};
+pub use crate::detection::Detection;
 use crate::geometry::PixelBox;
 use crate::units::{Metres, Seconds};
 
@@ -10,24 +11,6 @@ use crate::units::{Metres, Seconds};
 pub const MAX_TRACKS: usize = 128;
 /// Most detections used per frame; beyond it the highest scores are kept and the rest counted.
 pub const MAX_DETS: usize = 256;
-
-/// One detection of a frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Detection {
-    /// Box in pixels.
-    pub bbox: PixelBox,
-    /// Detector confidence.
-    pub score: f64,
-    /// Metric depth of the box centre when known (optional association cue).
-    pub depth: Option<Metres>,
-}
-
-impl Detection {
-    /// A detection without depth.
-    pub const fn new(bbox: PixelBox, score: f64) -> Self {
-        Self { bbox, score, depth: None }
-    }
-}
 
 /// Life-cycle state of a track.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -92,7 +92,7 @@ pub fn synth_detections(seq: &TuneSequence, noise: &DetNoise, seed: u64) -> Vec<
         let h = (b.h * (1.0 + rng.normal() * noise.jitter)).max(2.0);
         let score = (0.95 - 0.6 * (1.0 - v) + 0.08 * rng.normal()).clamp(0.05, 1.0);
         let depth = g.depth.map(|z| Metres(z * (1.0 + noise.depth_noise * rng.normal())));
-        slot.push(Detection { bbox: PixelBox::new(cx - w / 2.0, cy - h / 2.0, w, h), score, depth });
+        slot.push(Detection { depth, ..Detection::new(PixelBox::new(cx - w / 2.0, cy - h / 2.0, w, h), score) });
     }
     // False positives: sizes borrowed from real boxes, anywhere in the image.
     if !gt.is_empty() {
@@ -104,7 +104,7 @@ pub fn synth_detections(seq: &TuneSequence, noise: &DetNoise, seed: u64) -> Vec<
                 let y = rng.uniform() * (seq.height - h).max(1.0);
                 let score = 0.1 + 0.6 * rng.uniform();
                 let depth = model.depth.map(|z| Metres(z * (0.7 + 0.6 * rng.uniform())));
-                slot.push(Detection { bbox: PixelBox::new(x, y, w, h), score, depth });
+                slot.push(Detection { depth, ..Detection::new(PixelBox::new(x, y, w, h), score) });
             }
         }
     }
