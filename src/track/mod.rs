@@ -51,4 +51,4 @@ mod tracker;
 pub mod tune;
 
 pub use config::{ConfigError, Mode, TrackerConfig};
-pub use tracker::{Detection, MAX_DETS, MAX_TRACKS, TrackError, TrackOutput, TrackState, Tracker, TrackerStats};
+pub use tracker::{Detection, MAX_DETS, MAX_TRACKS, TrackError, TrackOutput, Tracker, TrackerStats};

@@ -12,9 +12,9 @@ pub const MAX_TRACKS: usize = 128;
 /// Most detections used per frame; beyond it the highest scores are kept and the rest counted.
 pub const MAX_DETS: usize = 256;
 
-/// Life-cycle state of a track.
+/// Life-cycle state of a track (internal: [`Tracker::outputs`] reports confirmed tracks).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum TrackState {
+enum TrackState {
     /// Seen fewer than `min_hits` times; not reported.
     Tentative,
     /// Confirmed and matched recently.
@@ -206,12 +206,6 @@ impl Tracker {
                 ..*o
             })
         })
-    }
-
-    /// Predicted boxes of all confirmed and lost tracks at the last predicted time (for a daemon
-    /// that detects every k-th frame): `(id, box)`.
-    pub fn predictions(&self) -> impl Iterator<Item = (u32, PixelBox)> + '_ {
-        self.tracks.iter().filter(|t| t.state != TrackState::Tentative).map(|t| (t.id, t.bbox()))
     }
 
     fn check_time(&self, t: f64) -> Result<(), TrackError> {
