@@ -133,14 +133,15 @@ pub fn run(args: TrackArgs) -> anyhow::Result<()> {
             let f = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
             let mut w = std::io::BufWriter::new(f);
             for r in &rows {
-                io::write_row(&mut w, r, io::Layout::Result).with_context(|| format!("writing {}", out.display()))?;
+                io::write_row(&mut w, r, io::RowLayout::Result)
+                    .with_context(|| format!("writing {}", out.display()))?;
             }
             w.flush().with_context(|| format!("writing {}", out.display()))?;
         } else if args.gt.is_none() {
             // Neither a file nor a score asked for: the tracks go to stdout.
             let mut text = Vec::new();
             for r in &rows {
-                io::write_row(&mut text, r, io::Layout::Result)?;
+                io::write_row(&mut text, r, io::RowLayout::Result)?;
             }
             super::write_stdout(&String::from_utf8_lossy(&text))?;
         }

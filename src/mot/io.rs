@@ -37,14 +37,14 @@ impl MotRow {
     }
 
     /// The row as text in `layout`, without a line end.
-    pub fn display(&self, layout: Layout) -> impl std::fmt::Display + '_ {
+    pub fn display(&self, layout: RowLayout) -> impl std::fmt::Display + '_ {
         Shown(self, layout)
     }
 }
 
 /// How [`write_row`] writes the columns of a row.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Layout {
+pub enum RowLayout {
     /// Detections and tracker results (as SORT writes them): ten columns, box and score to 1/100
     /// pixel, `frame,id,x,y,w,h,score,x,y,z`.
     Result,
@@ -53,7 +53,7 @@ pub enum Layout {
     GroundTruth,
 }
 
-struct Shown<'a>(&'a MotRow, Layout);
+struct Shown<'a>(&'a MotRow, RowLayout);
 
 impl std::fmt::Display for Shown<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -62,8 +62,8 @@ impl std::fmt::Display for Shown<'_> {
         write!(f, "{},{},{:.2},{:.2},{:.2},{:.2}", r.frame, r.id, b.x, b.y, b.w, b.h)?;
         let [e0, e1, e2] = r.extra;
         match layout {
-            Layout::Result => write!(f, ",{:.2},{e0},{e1},{e2}", r.score),
-            Layout::GroundTruth => write!(f, ",{},{e0},{e1:.4}", r.score),
+            RowLayout::Result => write!(f, ",{:.2},{e0},{e1},{e2}", r.score),
+            RowLayout::GroundTruth => write!(f, ",{},{e0},{e1:.4}", r.score),
         }
     }
 }
@@ -218,7 +218,7 @@ pub fn group_by_frame(rows: &mut [MotRow]) -> Vec<(u32, std::ops::Range<usize>)>
 }
 
 /// Writes one row in `layout`, with a line end.
-pub fn write_row(mut w: impl Write, row: &MotRow, layout: Layout) -> std::io::Result<()> {
+pub fn write_row(mut w: impl Write, row: &MotRow, layout: RowLayout) -> std::io::Result<()> {
     writeln!(w, "{}", row.display(layout))
 }
 
@@ -262,13 +262,13 @@ mod tests {
     fn writes_both_layouts_and_reads_them_back() {
         let r = MotRow::new(4, 12, PixelBox::new(1.0, 2.5, 30.126, 40.0), 0.9);
         let mut text = Vec::new();
-        write_row(&mut text, &r, Layout::Result).expect("in memory");
+        write_row(&mut text, &r, RowLayout::Result).expect("in memory");
         assert_eq!(text, b"4,12,1.00,2.50,30.13,40.00,0.90,-1,-1,-1\n");
         let back = read_rows(text.as_slice(), Path::new("r.txt"), ReadOptions::default()).expect("valid");
         assert_eq!(back[0].frame, 4);
         assert_eq!(back[0].score, 0.9);
         let g = MotRow { extra: [1.0, 0.25, -1.0], ..MotRow::new(4, 12, PixelBox::new(1.0, 2.0, 3.0, 4.0), 1.0) };
-        assert_eq!(g.display(Layout::GroundTruth).to_string(), "4,12,1.00,2.00,3.00,4.00,1,1,0.2500");
-        assert_eq!(parse_line(&g.display(Layout::GroundTruth).to_string()), Ok(Some(g)));
+        assert_eq!(g.display(RowLayout::GroundTruth).to_string(), "4,12,1.00,2.00,3.00,4.00,1,1,0.2500");
+        assert_eq!(parse_line(&g.display(RowLayout::GroundTruth).to_string()), Ok(Some(g)));
     }
 }

@@ -3,7 +3,7 @@
 
 use super::{Error, Result};
 use crate::geometry::{PixelBox, WorldPoint};
-use crate::mot::io::{Layout, MotRow, parse_line};
+use crate::mot::io::{MotRow, RowLayout, parse_line};
 use crate::units::Metres;
 use nalgebra::Vector3;
 use std::fmt::Write as _;
@@ -152,11 +152,11 @@ pub fn read_world(path: &Path) -> Result<Vec<WorldRow>> {
     parse_world(path, &read_text(path)?)
 }
 
-/// Formats `gt.txt` rows ([`Layout::GroundTruth`]: boxes to 1/100 pixel, visibility to 4 decimals).
+/// Formats `gt.txt` rows ([`RowLayout::GroundTruth`]: boxes to 1/100 pixel, visibility to 4 decimals).
 pub fn format_gt(rows: &[GtBox]) -> String {
     let mut s = String::with_capacity(rows.len() * 48);
     for r in rows {
-        let _ = writeln!(s, "{}", r.to_row().display(Layout::GroundTruth));
+        let _ = writeln!(s, "{}", r.to_row().display(RowLayout::GroundTruth));
     }
     s
 }
