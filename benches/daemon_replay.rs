@@ -113,7 +113,9 @@ async fn main() {
     let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(&seq, false, true).expect("open"));
     let pipe = service::build_pipeline(&cfg).expect("pipeline");
     let mut daemon =
-        Daemon::start(cfg, String::new(), src, pipe, RunOptions { max_frames: Some(n) }).await.expect("start");
+        Daemon::start(cfg, String::new(), src, pipe, RunOptions { max_frames: Some(n), ..RunOptions::default() })
+            .await
+            .expect("start");
     let shared = daemon.shared().clone();
     let t0 = Instant::now();
     let mut rss = Vec::new();

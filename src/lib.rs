@@ -14,6 +14,7 @@
 //! | [`metric`] | relative inverse depth to metres from reference objects | eq. 1-2 |
 //! | [`postprocess`] | box-fluctuation and depth-jump detectors with EWMA | eq. 3-4 |
 //! | [`motion`] | world positions, per-fish 3D speed, swarm mean (activity index) | sec. 3.3, eq. 5 |
+//! | [`pipeline`] | the stages chained on frame time; what every command runs | eq. 1-5 |
 //! | [`eval`], [`mot`] | speed, depth and tracking metrics against ground truth | sec. 4.5 |
 //! | [`capture`], [`output`], [`console`], [`config`], [`service`] | the edge daemon | - |
 //!
@@ -36,6 +37,7 @@ pub mod metric;
 pub mod mot;
 pub mod motion;
 pub mod output;
+pub mod pipeline;
 pub mod postprocess;
 pub mod rng;
 pub mod sequence;

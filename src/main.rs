@@ -18,7 +18,7 @@ struct Cli {
 enum Command {
     /// Write a synthetic underwater fish sequence with exact ground truth.
     Synth(cli::synth::SynthArgs),
-    /// Run the estimator on a sequence and score it against ground truth.
+    /// Run the daemon's pipeline on a recorded sequence and score it against ground truth.
     Eval(cli::eval::EvalArgs),
     /// Run the tracker on MOTChallenge detections.
     Track(cli::track::TrackArgs),
@@ -26,6 +26,8 @@ enum Command {
     Tune(cli::tune::TuneArgs),
     /// Run the edge daemon: camera or recording in, PLC and serial out.
     Run(cli::run::RunArgs),
+    /// Check a configuration file or show the effective configuration.
+    Config(cli::config::ConfigCmdArgs),
 }
 
 fn main() -> ExitCode {
@@ -42,6 +44,7 @@ fn main() -> ExitCode {
         Command::Track(a) => cli::track::run(a),
         Command::Tune(a) => cli::tune::run(a),
         Command::Run(a) => cli::run::run(a),
+        Command::Config(a) => cli::config::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -11,6 +11,31 @@ fn shipped_config_equals_defaults() {
     assert_eq!(c, Config::default(), "config/fme.toml must document the built-in defaults");
 }
 
+/// Every key of the built-in defaults is written in config/fme.toml (none left to be discovered),
+/// and `fme config show` prints a config that reads back equal.
+#[test]
+fn shipped_config_spells_out_every_key() {
+    fn keys(t: &toml::Table, prefix: &str, out: &mut Vec<String>) {
+        for (k, v) in t {
+            match v {
+                toml::Value::Table(sub) => keys(sub, &format!("{prefix}{k}."), out),
+                _ => out.push(format!("{prefix}{k}")),
+            }
+        }
+    }
+    let shown = Config::default().to_toml();
+    let defaults: toml::Table = toml::from_str(&shown).expect("config show is TOML");
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/fme.toml");
+    let file: toml::Table = toml::from_str(&std::fs::read_to_string(&p).expect("read")).expect("TOML");
+    let (mut want, mut have) = (Vec::new(), Vec::new());
+    keys(&defaults, "", &mut want);
+    keys(&file, "", &mut have);
+    let missing: Vec<&String> = want.iter().filter(|k| !have.contains(k)).collect();
+    assert!(missing.is_empty(), "config/fme.toml lacks {missing:?}");
+    assert!(want.len() > 100, "{} keys", want.len());
+    assert_eq!(Config::parse(&shown, Path::new("shown.toml")).expect("reads back"), Config::default());
+}
+
 #[test]
 fn every_key_in_shipped_config_is_commented() {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/fme.toml");
@@ -40,4 +65,68 @@ fn board_profiles_are_valid_configs() {
         }
     }
     assert!(n >= 4, "at least four board profiles, found {n}");
+}
+
+/// `fme config check`: the shipped file passes; each broken file exits 2 with a message naming the
+/// file, the line and the key, also inside inline tables and dotted keys.
+#[test]
+fn config_check_names_file_line_and_key() {
+    let fme = || std::process::Command::new(env!("CARGO_BIN_EXE_fme"));
+    let ok = fme().args(["config", "check", "config/fme.toml"]).current_dir(env!("CARGO_MANIFEST_DIR")).output();
+    let ok = ok.expect("run fme");
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cases: &[(&str, usize, &str)] = &[
+        ("[detector]\nrate_hz = 10.0\nconfdence = 0.3\n", 3, "detector.confdence"),
+        ("[depth]\n\nrate_hz = \"fast\"\n", 3, "depth.rate_hz"),
+        ("[output.modbus]\nmode = \"udp\"\n", 2, "output.modbus.mode"),
+        ("[detector]\nconfidence = 1.5\n", 2, "detector.confidence"),
+        (
+            "# inline\n\ntracker = { preset = \"sort\", iou_treshold = 0.3 }\n[source]\nfps = 30\n",
+            3,
+            "tracker.iou_treshold",
+        ),
+        ("[source]\nfps = 30\n[motion]\nmin_fish = 3\nspeed_span_s = -1.0\n", 5, "motion.speed_span_s"),
+        ("# a comment\n[sourcee]\npath = \"x\"\n", 2, "sourcee"),
+        ("[source\npath = \"x\"\n", 1, "source"),
+        ("\n[tracker]\npreset = \"bytetrack\"\n", 3, "tracker.preset"),
+        ("[feeding]\non_above_mps = 0.1\noff_below_mps = 0.2\n", 3, "feeding.off_below_mps"),
+        ("[postprocess]\ndepth_smoothing_s = -1.0\n", 2, "postprocess.depth_smoothing_s"),
+        ("[tracker]\nmin_hits = 2\niou_threshold = 1.5\n", 3, "tracker.iou_threshold"),
+        ("[output]\nmodbus.max_connections = 0\n", 2, "output.modbus.max_connections"),
+    ];
+    for (i, (text, line, key)) in cases.iter().enumerate() {
+        let p = dir.path().join(format!("broken{i}.toml"));
+        std::fs::write(&p, text).expect("write");
+        let out = fme().args(["config", "check"]).arg(&p).output().expect("run fme");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "case {i}: {err}");
+        let want = format!("broken{i}.toml:{line}: key `{key}`");
+        assert!(err.contains(&want), "case {i}: want {want:?} in {err}");
+    }
+    let out = fme().args(["config", "check"]).arg(dir.path().join("none.toml")).output().expect("run fme");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("none.toml"));
+}
+
+/// `fme config show` prints the effective config with `--set` overrides; a bad `--set` is named.
+#[test]
+fn config_show_applies_overrides() {
+    let fme = || std::process::Command::new(env!("CARGO_BIN_EXE_fme"));
+    let out = fme()
+        .args(["config", "show", "--set", "detector.rate_hz=30", "--set", "source.path=/dev/video2"])
+        .output()
+        .expect("run fme");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let shown = String::from_utf8_lossy(&out.stdout);
+    let c = Config::parse(&shown, Path::new("shown")).expect("shown config reads back");
+    assert_eq!((c.detector.rate_hz, c.source.path.to_str()), (30.0, Some("/dev/video2")));
+    assert_eq!(
+        Config { detector: Config::default().detector, source: Config::default().source, ..c },
+        Config::default()
+    );
+    let out = fme().args(["config", "show", "--set", "detector.rate_hz=fast"]).output().expect("run fme");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--set detector.rate_hz=fast") && err.contains("detector.rate_hz"), "{err}");
 }

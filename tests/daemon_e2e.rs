@@ -143,19 +143,19 @@ async fn serial_line_output_over_pty() {
 /// A stage that panics on some frames (e.g. a decoder bug on a corrupt frame).
 struct PanicsSometimes(u32);
 
-impl fme::service::pipeline::Pipeline for PanicsSometimes {
+impl fme::pipeline::Pipeline for PanicsSometimes {
     fn process(
         &mut self,
         frame: &fme::capture::Frame,
-    ) -> Result<Option<fme::service::pipeline::ActivitySample>, fme::service::pipeline::PipelineError> {
+    ) -> Result<Option<fme::pipeline::ActivitySample>, fme::pipeline::PipelineError> {
         self.0 += 1;
         if self.0.is_multiple_of(3) {
             panic!("corrupt frame {}", frame.seq);
         }
         Ok(None)
     }
-    fn health(&self) -> fme::service::pipeline::StageHealth {
-        fme::service::pipeline::StageHealth::default()
+    fn health(&self) -> fme::pipeline::StageHealth {
+        fme::pipeline::StageHealth::default()
     }
 }
 

@@ -3,6 +3,8 @@
 #![allow(dead_code)]
 
 use fme::config::{Config, ModbusMode};
+use fme::pipeline::{ActivitySample, Frame, Pipeline, PipelineError, QualityFlags, StageHealth};
+use fme::units::{MetresPerSecond, Seconds};
 use std::path::Path;
 
 /// Writes a small MOTChallenge-style recording: dark water with bright "fish" squares moving at
@@ -37,8 +39,8 @@ pub fn write_sequence(dir: &Path, frames: usize, w: u32, h: u32, fps: u32) {
 /// The pipeline of the daemon-edge tests (Modbus, serial, console, watchdog): the frame-difference
 /// test double, so these tests exercise the edges quickly without models. The real pipeline has its
 /// own end-to-end tests (`pipeline_e2e.rs`).
-pub fn edge_pipeline(cfg: &Config) -> Box<dyn fme::service::pipeline::Pipeline> {
-    Box::new(fme::service::pipeline::FrameDiffPipeline::new(cfg.motion.smoothing_s, cfg.motion.body_length_m))
+pub fn edge_pipeline(cfg: &Config) -> Box<dyn Pipeline> {
+    Box::new(FrameDiffPipeline::new(cfg.motion.smoothing_s.0, cfg.motion.body_length_m.0))
 }
 
 /// A config for tests: the given sequence, Modbus TCP server on an ephemeral local port, fast output.
@@ -48,10 +50,112 @@ pub fn test_config(seq: &Path) -> Config {
     c.output.modbus.mode = ModbusMode::TcpServer;
     c.output.modbus.listen = "127.0.0.1:0".into();
     c.output.rate_hz = 10.0;
-    c.motion.smoothing_s = 1.0;
+    c.motion.smoothing_s = fme::units::Seconds(1.0);
     c.service.systemd_notify = false;
     c.service.stop_grace_ms = 300;
     c
+}
+
+/// Test double for the daemon's edges: the "activity" is the mean absolute
+/// grey-level change between consecutive frames on a coarse grid, scaled by `scale_mps` per unit of
+/// mean change per second. It exercises every edge of the daemon with values that move with the
+/// scene; it is **not** a fish-speed estimate and always flags `depth_uncalibrated`.
+#[derive(Debug)]
+pub struct FrameDiffPipeline {
+    prev: Vec<u8>,
+    cur: Vec<u8>,
+    prev_t: Option<Seconds>,
+    smoothed: Option<f64>,
+    smoothing_s: f64,
+    scale_mps: f64,
+    body_length_m: f64,
+    grid: usize,
+    ok: bool,
+}
+
+impl FrameDiffPipeline {
+    /// Grid cells per side used for the grey-level comparison.
+    pub const GRID: usize = 32;
+
+    /// A test double with EWMA time constant `smoothing_s` and body length `body_length_m`.
+    pub fn new(smoothing_s: f64, body_length_m: f64) -> Self {
+        Self {
+            prev: vec![0; Self::GRID * Self::GRID],
+            cur: vec![0; Self::GRID * Self::GRID],
+            prev_t: None,
+            smoothed: None,
+            smoothing_s,
+            scale_mps: 0.02,
+            body_length_m,
+            grid: Self::GRID,
+            ok: false,
+        }
+    }
+
+    fn sample_grid(&self, frame: &Frame, out: &mut [u8]) -> Result<(), PipelineError> {
+        let img = frame.to_luma().map_err(|message| PipelineError::Decode { seq: frame.seq, message })?;
+        let (w, h) = (img.width() as usize, img.height() as usize);
+        if w == 0 || h == 0 {
+            return Err(PipelineError::Decode { seq: frame.seq, message: "empty image".into() });
+        }
+        for gy in 0..self.grid {
+            for gx in 0..self.grid {
+                let x = (gx * w + w / 2) / self.grid;
+                let y = (gy * h + h / 2) / self.grid;
+                out[gy * self.grid + gx] = img.get_pixel(x.min(w - 1) as u32, y.min(h - 1) as u32).0[0];
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Pipeline for FrameDiffPipeline {
+    fn process(&mut self, frame: &Frame) -> Result<Option<ActivitySample>, PipelineError> {
+        let mut cur = std::mem::take(&mut self.cur);
+        let r = self.sample_grid(frame, &mut cur);
+        self.cur = cur;
+        if let Err(e) = r {
+            self.ok = false;
+            return Err(e);
+        }
+        self.ok = true;
+        let t = frame.timestamp;
+        let prev_t = self.prev_t.replace(t);
+        std::mem::swap(&mut self.prev, &mut self.cur); // prev = this frame, cur = the previous one
+        let Some(pt) = prev_t else { return Ok(None) };
+        let dt = (t - pt).get();
+        if dt.is_nan() || dt <= 0.0 {
+            return Ok(None); // loop restart or duplicate timestamp: no speed across it
+        }
+        let n = self.cur.len() as f64;
+        let diffs = self.cur.iter().zip(&self.prev).map(|(a, b)| (f64::from(*a) - f64::from(*b)).abs() / 255.0);
+        let (sum, sum2) = diffs.fold((0.0, 0.0), |(s, s2), d| (s + d, s2 + d * d));
+        let mean = sum / n;
+        let var = (sum2 / n - mean * mean).max(0.0);
+        let v = self.scale_mps * mean / dt;
+        let ci = self.scale_mps * 1.96 * (var / n).sqrt() / dt;
+        let alpha = (dt / self.smoothing_s).clamp(0.0, 1.0);
+        let s = match self.smoothed {
+            Some(s) => s + alpha * (v - s),
+            None => v,
+        };
+        self.smoothed = Some(s);
+        Ok(Some(ActivitySample {
+            timestamp: t,
+            mean: MetresPerSecond(v),
+            mean_body_lengths: v / self.body_length_m,
+            smoothed: MetresPerSecond(s),
+            ci95_half: MetresPerSecond(ci),
+            fish: 0,
+            latency: Seconds(0.0),
+            flags: QualityFlags { too_few_fish: true, depth_uncalibrated: true, stale: false },
+        }))
+    }
+
+    fn health(&self) -> StageHealth {
+        // No depth stage here, so nothing to fail: depth_ok follows frame decoding like detector_ok.
+        StageHealth { detector_ok: self.ok, depth_ok: self.ok, ..StageHealth::default() }
+    }
 }
 
 #[test]

@@ -7,7 +7,7 @@ mod support;
 
 use fme::capture::{Frame, FrameSource, RecordedSource};
 use fme::output::registers::FaultCode;
-use fme::service::pipeline::{ActivitySample, Pipeline, PipelineError, StageHealth};
+use fme::pipeline::{ActivitySample, Pipeline, PipelineError, StageHealth};
 use fme::service::{Daemon, RunOptions};
 use std::os::unix::net::UnixDatagram;
 use std::time::{Duration, Instant};

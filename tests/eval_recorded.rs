@@ -2,7 +2,9 @@
 //! in its COMMAND file): the estimator meets its accuracy on real generator output, post-processing
 //! (eq. 4) helps, and the robust metric fit gets depth right where the paper's linear fit does not.
 
-use fme::eval::{DepthChoice, EvalOptions, FitChoice, evaluate};
+use fme::config::Config;
+use fme::eval::{DepthChoice, EvalOptions, evaluate};
+use fme::metric::FitMethod;
 use fme::sequence::Sequence;
 
 fn seq() -> Sequence {
@@ -11,51 +13,55 @@ fn seq() -> Sequence {
 
 #[test]
 fn gt_boxes_and_depth_on_the_recorded_swarm() {
-    let r = evaluate(&seq(), &EvalOptions::default()).unwrap();
+    let cfg = Config::default();
+    let r = evaluate(&seq(), &cfg, &EvalOptions::default()).unwrap();
     // A fish enters the mean once tracked `min_age` (1 s), so the first 30 of the 120 frames have no value.
     assert!(r.frames >= 85 && r.mean_fish > 15.0, "frames {} fish {}", r.frames, r.mean_fish);
-    // Measured 0.0089 m/s (0.0095 without post-processing; every fish at once, `min_age` 0, 0.0111 and
-    // 0.0115; with the paper's depth chord, `along_ray = depth`, 0.012 and 0.031 before `min_age`: eq. 4
-    // matters less once the heading gives the along-ray speed); the bound leaves room for generator changes.
+    // The shipped pipeline (10/5 Hz, visible sampling, depth smoothing) with a perfect detector,
+    // tracker and depth map; the bound leaves room for generator changes (figures: docs/accuracy.md).
     assert!(r.speed_rmse_mps < 0.025, "rmse {}", r.speed_rmse_mps);
-    assert!(
-        r.speed_rmse_mps < r.speed_rmse_raw_mps,
-        "post-processing must help: {} vs {}",
-        r.speed_rmse_mps,
-        r.speed_rmse_raw_mps
-    );
-    assert!(r.depths_corrected > 0);
+    // Eq. 4 matters where depth is read as the paper reads it, at the box centre, where a fish
+    // passing in front shows as a depth jump (the shipped `visible` sampling avoids most of those),
+    // and with the paper's depth chord, where a jump becomes speed at once.
+    let mut centre = cfg.clone();
+    centre.depth.sample = fme::metric::DepthSample::Centre;
+    centre.postprocess.depth_smoothing_s = fme::units::Seconds(0.0);
+    centre.motion.along_ray = fme::motion::AlongRay::Depth;
+    let on = evaluate(&seq(), &centre, &EvalOptions::default()).unwrap();
+    centre.postprocess.depth_jump = false;
+    let off = evaluate(&seq(), &centre, &EvalOptions::default()).unwrap();
+    assert!(on.speed_rmse_mps < off.speed_rmse_mps, "eq. 4 must help: {} vs {}", on.speed_rmse_mps, off.speed_rmse_mps);
+    assert!(on.depths_corrected > 0 && off.depths_corrected == 0);
 }
 
 #[test]
 fn relative_gt_robust_fit_beats_the_linear_fit() {
     let s = seq();
-    let robust =
-        evaluate(&s, &EvalOptions { depth: DepthChoice::RelativeGt, fit: FitChoice::Robust, ..Default::default() })
-            .unwrap();
-    let linear =
-        evaluate(&s, &EvalOptions { depth: DepthChoice::RelativeGt, fit: FitChoice::Linear, ..Default::default() })
-            .unwrap();
+    let opts = EvalOptions { depth: DepthChoice::RelativeGt, ..Default::default() };
+    let with_fit = |fit| {
+        let mut c = Config::default();
+        c.depth.fit = fit;
+        evaluate(&s, &c, &opts).unwrap()
+    };
+    let (robust, linear) = (with_fit(FitMethod::Robust), with_fit(FitMethod::Linear));
     let (dr, dl) = (robust.depth_rmse_m.unwrap(), linear.depth_rmse_m.unwrap());
     // Measured 0.029 m and 0.41 m: fish hiding reference cubes pull the plain fit.
     assert!(dr < 0.1, "robust depth RMSE {dr}");
     assert!(dr < 0.5 * dl, "robust {dr} vs linear {dl}");
-    assert_eq!(robust.depth_delta_1_25, Some(1.0));
+    assert!(robust.depth_delta_1_25.is_some_and(|d| d > 0.99), "{:?}", robust.depth_delta_1_25);
     assert!(robust.speed_rmse_mps < 0.03, "robust speed RMSE {}", robust.speed_rmse_mps);
 }
 
 /// The bundled int8 detector and depth network (`models/`) on the recorded swarm, through `fme eval`
-/// as `make demo` runs it (group D of the paper's four). It guards the bundled files: a broken export,
-/// quantisation or graph rewrite shows here as lost fish, wrong depth or a wrong activity index.
-/// Measured 2026-12-03 (with "Speed from the heading" and `min_age` 1 s): speed RMSE 0.0133 m/s (0.0157
-/// with every fish at once), DistCorr 0.983, depth delta<1.25 0.993, MOTA 0.954, IDF1 0.955, 18.8 fish
-/// in the mean per frame.
+/// with no other flag, as `make demo` runs it: the daemon's pipeline with the daemon's defaults
+/// (group D of the paper's four). It guards the bundled files: a broken export, quantisation or graph
+/// rewrite shows here as lost fish, wrong depth or a wrong activity index (figures in
+/// docs/accuracy.md).
 #[test]
 fn bundled_models_track_and_measure_the_recorded_swarm() {
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_fme"))
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .args(["eval", "--json", "--sequence", "tests/data/swarm20", "--boxes", "model", "--depth", "model"])
-        .args(["--fit", "robust"])
         .output()
         .expect("run fme eval");
     assert!(out.status.success(), "fme eval failed: {}", String::from_utf8_lossy(&out.stderr));

@@ -2,13 +2,16 @@
 //! depth maps, so the expected speeds are known; and bad input (missing files, malformed rows, NaN)
 //! that must fail with the file and line named and a non-zero exit.
 
-use fme::eval::{DepthChoice, EvalOptions, FitChoice, evaluate};
+use fme::config::Config;
+use fme::eval::{DepthChoice, EvalOptions, evaluate};
 use fme::geometry::{Camera, Intrinsics, PixelBox, Pose, WorldPoint};
+use fme::metric::{DepthSample, FitMethod};
 use fme::sequence::{
     CameraMeta, DepthMap, GeneratorMeta, GtBox, Meta, ReferenceObject, SeqInfo, Sequence, SequenceWriter, StagedDir,
     WaterMeta, WorldRow,
 };
 use fme::units::Metres;
+use fme::units::Seconds;
 use nalgebra::Vector3;
 use std::path::Path;
 use std::process::Command;
@@ -167,12 +170,31 @@ fn fme() -> Command {
 /// The boxes written here keep one size whatever way the fish swims (they are not drawn as swimming
 /// fish), so tests that check exact speeds take the speed along the line of sight from the depth, as
 /// the paper does (`motion.along_ray = "depth"`); `tests/eval_recorded.rs` checks the heading method
-/// on rendered fish.
-fn depth_chord() -> EvalOptions {
-    let mut opts = EvalOptions::default();
-    opts.motion.along_ray = fme::motion::AlongRay::Depth;
-    opts
+/// on rendered fish. They check the estimator's arithmetic, so the inputs are read on every frame,
+/// at the box centre, without the depth smoothing a depth network needs.
+fn depth_chord() -> Config {
+    let mut c = Config::default();
+    c.motion.along_ray = fme::motion::AlongRay::Depth;
+    c.detector.rate_hz = 0.0;
+    c.depth.rate_hz = 0.0;
+    c.depth.sample = DepthSample::Centre;
+    c.postprocess.depth_smoothing_s = Seconds(0.0);
+    c
 }
+
+/// `depth_chord()` on the command line.
+const EXACT: [&str; 10] = [
+    "--every-frame",
+    "--along-ray",
+    "depth",
+    "--depth-sample",
+    "centre",
+    "--set",
+    "postprocess.depth_smoothing_s=0",
+    "--set",
+    "motion.smoothing_s=2",
+    "--json",
+];
 
 #[test]
 fn gt_boxes_and_gt_depth_recover_known_speeds() {
@@ -180,7 +202,7 @@ fn gt_boxes_and_gt_depth_recover_known_speeds() {
     let dir = tmp.path().join("seq");
     write_sequence(&dir);
     let seq = Sequence::open(&dir).unwrap();
-    let r = evaluate(&seq, &depth_chord()).unwrap();
+    let r = evaluate(&seq, &depth_chord(), &EvalOptions::default()).unwrap();
     // Each fish enters the mean once tracked `min_age` (1 s = 30 frames): frames 31-60 are scored.
     assert_eq!(r.frames, (N - 30) as usize);
     // True mean speed: (0.4 + |(-0.2, 0.3, 0.1)| + |(0.1, -0.25, 0)|) / 3, constant.
@@ -199,8 +221,8 @@ fn tracker_boxes_are_scored_for_tracking_and_speed() {
     let dir = tmp.path().join("seq");
     write_sequence(&dir);
     let seq = Sequence::open(&dir).unwrap();
-    let opts = EvalOptions { boxes: fme::eval::BoxesChoice::Tracker, ..depth_chord() };
-    let r = evaluate(&seq, &opts).unwrap();
+    let opts = EvalOptions { boxes: fme::eval::BoxesChoice::Tracker, ..Default::default() };
+    let r = evaluate(&seq, &depth_chord(), &opts).unwrap();
     let m = r.mot.expect("tracking metrics for --boxes tracker");
     // Three well separated fish, 5% misses and jitter: the tracker keeps them apart.
     assert!(m.idf1 > 0.8 && m.mota > 0.7, "{}", summary(&r));
@@ -211,7 +233,7 @@ fn tracker_boxes_are_scored_for_tracking_and_speed() {
     }
     let truth = (0.4 + (0.04f64 + 0.09 + 0.01).sqrt() + (0.01f64 + 0.0625).sqrt()) / 3.0;
     assert!((r.mean_est_mps - truth).abs() < 0.05, "{}", summary(&r));
-    let gt = evaluate(&seq, &depth_chord()).unwrap();
+    let gt = evaluate(&seq, &depth_chord(), &EvalOptions::default()).unwrap();
     assert!(r.speed_rmse_mps > gt.speed_rmse_mps * 0.5, "noisy detections cannot beat ground truth by much");
 }
 
@@ -221,21 +243,28 @@ fn post_processing_removes_box_fluctuation() {
     let dir = tmp.path().join("seq");
     write_sequence_with(&dir, true, 3);
     let seq = Sequence::open(&dir).unwrap();
-    let mut opts = EvalOptions { postprocess: fme::postprocess::PostprocessConfig::paper(), ..Default::default() };
-    opts.motion.speed_span = fme::units::Seconds(0.0);
-    let r = evaluate(&seq, &opts).unwrap();
-    assert!(r.boxes_corrected > 0);
-    assert!(r.speed_rmse_raw_mps > 0.2, "{}", summary(&r));
-    assert!(r.speed_rmse_mps < 0.5 * r.speed_rmse_raw_mps, "{}", summary(&r));
+    let mut cfg = depth_chord();
+    cfg.motion.along_ray = fme::motion::AlongRay::default();
+    cfg.postprocess = fme::postprocess::PostprocessConfig::paper();
+    cfg.postprocess.depth_smoothing_s = Seconds(0.0);
+    cfg.motion.speed_span_s = Seconds(0.0);
+    let r = evaluate(&seq, &cfg, &EvalOptions::default()).unwrap();
+    cfg.postprocess = fme::postprocess::PostprocessConfig::off();
+    let raw = evaluate(&seq, &cfg, &EvalOptions::default()).unwrap();
+    assert!(r.boxes_corrected > 0 && raw.boxes_corrected == 0);
+    assert!(raw.speed_rmse_mps > 0.2, "{}", summary(&raw));
+    assert!(r.speed_rmse_mps < 0.5 * raw.speed_rmse_mps, "{} vs {}", summary(&r), summary(&raw));
 }
 
 /// Ground-truth depth made relative without noise, then the inverse fit: the depth path with
 /// nothing in it that is not exact.
-fn exact_relative_gt() -> EvalOptions {
-    let mut opts = EvalOptions { depth: DepthChoice::RelativeGt, fit: FitChoice::Inverse, ..depth_chord() };
+fn exact_relative_gt() -> (Config, EvalOptions) {
+    let mut cfg = depth_chord();
+    cfg.depth.fit = FitMethod::Inverse;
+    let mut opts = EvalOptions { depth: DepthChoice::RelativeGt, ..Default::default() };
     opts.relative.pixel_noise = 0.0;
     opts.relative.low_freq = 0.0;
-    opts
+    (cfg, opts)
 }
 
 #[test]
@@ -244,8 +273,8 @@ fn relative_gt_with_inverse_and_robust_fits_gets_depth_right() {
     let dir = tmp.path().join("seq");
     write_sequence(&dir);
     let seq = Sequence::open(&dir).unwrap();
-    let mut opts = exact_relative_gt();
-    let exact = evaluate(&seq, &opts).unwrap();
+    let (mut cfg, mut opts) = exact_relative_gt();
+    let exact = evaluate(&seq, &cfg, &opts).unwrap();
     assert_eq!(exact.references_visible, 6);
     assert!(exact.depth_rmse_m.unwrap() < 0.01, "{}", summary(&exact));
     // Ground-truth boxes carry world.csv's ids: depth is also scored against each body centre
@@ -256,9 +285,9 @@ fn relative_gt_with_inverse_and_robust_fits_gets_depth_right() {
     assert!(exact.fit_residual_m.unwrap() < 0.01);
     // Two fouled references: the plain inverse fit suffers, the robust one does not.
     opts.foul_refs = 2;
-    let fouled = evaluate(&seq, &opts).unwrap();
-    opts.fit = FitChoice::Robust;
-    let robust = evaluate(&seq, &opts).unwrap();
+    let fouled = evaluate(&seq, &cfg, &opts).unwrap();
+    cfg.depth.fit = FitMethod::Robust;
+    let robust = evaluate(&seq, &cfg, &opts).unwrap();
     assert!(fouled.depth_rmse_m.unwrap() > 0.1, "{}", summary(&fouled));
     assert!(fouled.depth_body_rmse_m.unwrap() > 0.1, "{}", summary(&fouled));
     assert!(robust.depth_rmse_m.unwrap() < 0.01, "{}", summary(&robust));
@@ -271,15 +300,15 @@ fn visible_sampling_reads_a_half_hidden_fish_where_it_is_seen() {
     let dir = tmp.path().join("seq");
     write_sequence_hidden(&dir);
     let seq = Sequence::open(&dir).unwrap();
-    let mut opts = exact_relative_gt();
+    let (mut cfg, opts) = exact_relative_gt();
     // The near quarter of the whole core is fish 0, 1 m in front of fish 3: 1 m of error on one
     // fish in four.
-    opts.depth_sample = fme::metric::DepthSample::Box;
-    let boxed = evaluate(&seq, &opts).unwrap();
+    cfg.depth.sample = DepthSample::Box;
+    let boxed = evaluate(&seq, &cfg, &opts).unwrap();
     assert!(boxed.depth_body_rmse_m.unwrap() > 0.4, "{}", summary(&boxed));
     // Where no other box covers it, fish 3 is itself; every fish keeps its depth.
-    opts.depth_sample = fme::metric::DepthSample::Visible;
-    let visible = evaluate(&seq, &opts).unwrap();
+    cfg.depth.sample = DepthSample::Visible;
+    let visible = evaluate(&seq, &cfg, &opts).unwrap();
     assert!(visible.depth_body_rmse_m.unwrap() < 0.02, "{}", summary(&visible));
     assert_eq!(visible.depth_body_coverage, Some(1.0), "{}", summary(&visible));
     assert!(visible.speed_rmse_mps < boxed.speed_rmse_mps, "{} vs {}", summary(&visible), summary(&boxed));
@@ -294,7 +323,7 @@ fn cli_json_series_and_plot() {
     let out = fme()
         .args(["eval", "--sequence"])
         .arg(&dir)
-        .args(["--depth", "relative-gt", "--fit", "robust", "--json", "--series"])
+        .args(["--depth", "relative-gt", "--json", "--series"])
         .arg(&series)
         .arg("--plot")
         .arg(&plot)
@@ -307,7 +336,8 @@ fn cli_json_series_and_plot() {
         "speed_rmse_mps",
         "speed_distcorr",
         "error_ci95_mps",
-        "speed_rmse_raw_mps",
+        "speed_rmse_now_mps",
+        "cpu_ms_per_frame",
         "depth_rmse_m",
         "depth_delta_1_25",
         "depth_delta_1_25_2",
@@ -315,7 +345,9 @@ fn cli_json_series_and_plot() {
         assert!(j.get(k).is_some(), "missing {k} in {j}");
     }
     let csv = std::fs::read_to_string(&series).unwrap();
-    assert!(csv.starts_with("frame,t,true_mps,est_mps,n_fish\n"));
+    assert!(csv.starts_with(
+        "frame,t,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,latency_s,too_few_fish,uncalibrated,true_mps,true_now_mps\n"
+    ));
     assert_eq!(csv.lines().count(), N as usize + 1);
     let png = image::open(&plot).unwrap();
     assert_eq!((png.width(), png.height()), (1200, 560));
@@ -329,13 +361,7 @@ fn cli_tracks_rows_follow_each_fish() {
     let dir = tmp.path().join("seq");
     write_sequence(&dir);
     let tracks = tmp.path().join("t.csv");
-    let out = fme()
-        .args(["eval", "--json", "--along-ray", "depth", "--sequence"])
-        .arg(&dir)
-        .arg("--tracks")
-        .arg(&tracks)
-        .output()
-        .unwrap();
+    let out = fme().arg("eval").args(EXACT).arg("--sequence").arg(&dir).arg("--tracks").arg(&tracks).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let csv = std::fs::read_to_string(&tracks).unwrap();
     let mut lines = csv.lines();
@@ -439,7 +465,8 @@ fn bad_input_names_file_and_line_and_exits_non_zero() {
     // Missing models are named; a bad tracker preset is a usage error.
     fails_with(&["--boxes", "model", "--det-model", "/nonexistent/det.onnx"], &dir, &["/nonexistent/det.onnx"]);
     fails_with(&["--depth", "model", "--depth-model", "/nonexistent/depth.onnx"], &dir, &["/nonexistent/depth.onnx"]);
-    fails_with(&["--boxes", "tracker", "--tracker", "bogus"], &dir, &["--tracker"]);
+    fails_with(&["--boxes", "tracker", "--set", "tracker.preset=bogus"], &dir, &["tracker.preset", "bogus"]);
+    fails_with(&["--set", "motion.speed_span_s=-1"], &dir, &["motion.speed_span_s"]);
     // A track file with a malformed row and one with NaN.
     let tracks = tmp.path().join("tracks.txt");
     std::fs::write(&tracks, "1,1,10,10,20,8,1,-1,-1,-1\n2,1,oops,10,20,8,1,-1,-1,-1\n").unwrap();

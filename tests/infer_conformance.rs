@@ -35,7 +35,10 @@ fn yolo11n_export_loads_and_decodes_like_ultralytics() {
             model: dir().join(format!("yolo11n_{size}.onnx")),
             num_classes: Some(80),
             // Ultralytics keeps scores strictly above conf; fme keeps >= conf.
-            conf_threshold: conf.next_up(),
+            confidence: f64::from(conf.next_up()),
+            // Ultralytics' NMS: per class, IoU 0.7.
+            nms_iou: 0.7,
+            class_agnostic: false,
             ..Default::default()
         };
         let mut det = Detector::open(&cfg, SessionOptions::default()).unwrap();

@@ -2,7 +2,7 @@
 //! NMS, and the reduced-rate scheduler on real, jittery timestamps.
 
 use fme::geometry::PixelBox;
-use fme::infer::{InferSchedule, Letterbox, RateScheduler, ScheduleConfig, decode_yolo, nms};
+use fme::infer::{InferSchedule, Letterbox, RateScheduler, decode_yolo, nms};
 use fme::units::Seconds;
 
 #[test]
@@ -116,7 +116,7 @@ fn scheduler_tolerates_jitter_and_recovers_from_gaps_and_restarts() {
 
 #[test]
 fn detection_and_depth_run_at_their_own_rates() {
-    let mut plan = InferSchedule::new(&ScheduleConfig { detect_hz: 10.0, depth_hz: 2.0 });
+    let mut plan = InferSchedule::new(10.0, 2.0);
     let (mut det, mut dep) = (0, 0);
     for i in 0..300 {
         let p = plan.plan(Seconds(i as f64 / 30.0));

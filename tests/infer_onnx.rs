@@ -12,8 +12,9 @@ fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/onnx").join(name)
 }
 
+/// The fixtures' expectations follow Ultralytics' defaults: conf 0.25, per-class NMS at IoU 0.7.
 fn det_cfg(name: &str) -> DetectorConfig {
-    DetectorConfig { model: fixture(name), ..Default::default() }
+    DetectorConfig { model: fixture(name), confidence: 0.25, nms_iou: 0.7, class_agnostic: false, ..Default::default() }
 }
 
 fn solid(w: u32, h: u32, v: u8) -> Vec<u8> {

@@ -4,9 +4,9 @@
 
 use fme::capture::{Frame, FrameSource, RecordedSource};
 use fme::config::Config;
-use fme::service::calibration::Calibration;
-use fme::service::fish_pipeline::FishPipeline;
-use fme::service::pipeline::Pipeline;
+use fme::pipeline::Calibration;
+use fme::pipeline::FishPipeline;
+use fme::pipeline::Pipeline;
 use fme::units::Seconds;
 use std::path::Path;
 

@@ -4,10 +4,10 @@
 
 use fme::capture::{Frame, FrameSource, PixelFormat, RecordedSource};
 use fme::config::Config;
+use fme::pipeline::Calibration;
+use fme::pipeline::FishPipeline;
+use fme::pipeline::{ActivitySample, Pipeline, PipelineError};
 use fme::sequence::Sequence;
-use fme::service::calibration::Calibration;
-use fme::service::fish_pipeline::FishPipeline;
-use fme::service::pipeline::{ActivitySample, Pipeline, PipelineError};
 use fme::units::Seconds;
 use std::path::Path;
 
@@ -16,7 +16,7 @@ const SEQ: &str = "tests/data/swarm20";
 fn config() -> Config {
     let mut c = Config::default();
     c.source.path = SEQ.into();
-    c.motion.smoothing_s = 2.0;
+    c.motion.smoothing_s = Seconds(2.0);
     c
 }
 
@@ -105,11 +105,17 @@ fn a_bad_frame_is_an_error_and_the_next_one_is_fine() {
 fn time_going_backwards_restarts_tracking_without_error() {
     let mut p = FishPipeline::new(&config(), None).expect("pipeline");
     let frames = frames();
-    run(&mut p, &frames[..30]);
-    assert!(p.health().tracks > 0);
-    // The camera restarts: timestamps start again from zero.
-    let again = run(&mut p, &frames[..10]);
-    assert_eq!(again.len(), 10);
+    let before = run(&mut p, &frames[..30]);
+    assert!(p.health().tracks > 0 && p.tracks().count() > 0);
+    assert!(before.last().is_some_and(|s| s.fish == 0), "uncalibrated: fish tracked, none with a speed");
+    // The camera restarts: timestamps start again from zero. The old tracks must be gone at once
+    // (a track needs two detections to be confirmed again), and tracking resumes.
+    let first = p.process(&frames[0]).expect("frame after the restart").expect("a sample");
+    assert_eq!(first.timestamp, Seconds(0.0));
+    assert_eq!(p.health().tracks, 0, "tracks reset: {:?}", p.health());
+    assert_eq!(p.tracks().count(), 0, "estimator reset");
+    run(&mut p, &frames[1..10]);
+    assert!(p.health().tracks > 0, "tracking resumes after the restart: {:?}", p.health());
     let mut nan = frames[10].clone();
     nan.timestamp = Seconds(f64::NAN);
     assert!(p.process(&nan).is_err(), "a NaN timestamp is refused");
@@ -160,4 +166,40 @@ async fn daemon_with_the_real_pipeline_feeds_the_plc() {
     let mean = decode_f32([r[0], r[1]], WordOrder::HighFirst);
     assert!(mean.is_finite() && (0.01..2.0).contains(&mean), "activity {mean} m/s");
     assert_eq!(r[9], (mean * 1000.0).round() as u16, "mm/s register");
+}
+
+/// What `fme eval` scores is what `fme run` ships: on a recording replayed with `--fast --no-loop`,
+/// the daemon's per-frame series and the evaluation's are the same on every frame (the pipeline is
+/// deterministic given the frames; `--fast` waits for the pipeline instead of dropping frames).
+#[test]
+fn run_and_eval_give_the_same_series_on_every_frame() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let (run_csv, eval_csv) = (tmp.path().join("run.csv"), tmp.path().join("eval.csv"));
+    let fme = || std::process::Command::new(env!("CARGO_BIN_EXE_fme"));
+    let out = fme()
+        .args(["run", "--source", SEQ, "--fast", "--no-loop", "--set", "output.modbus.mode=off", "--series"])
+        .arg(&run_csv)
+        .output()
+        .expect("run fme run");
+    assert!(out.status.success(), "fme run: {}", String::from_utf8_lossy(&out.stderr));
+    let out = fme()
+        .args(["eval", "--sequence", SEQ, "--boxes", "model", "--depth", "model", "--json", "--series"])
+        .arg(&eval_csv)
+        .output()
+        .expect("run fme eval");
+    assert!(out.status.success(), "fme eval: {}", String::from_utf8_lossy(&out.stderr));
+    let run = std::fs::read_to_string(&run_csv).expect("run series");
+    let eval = std::fs::read_to_string(&eval_csv).expect("eval series");
+    let columns = run.lines().next().expect("header").split(',').count();
+    assert_eq!(columns, 10, "{run}");
+    let head = |l: &str| l.split(',').take(columns).collect::<Vec<_>>().join(",");
+    let (r, e): (Vec<String>, Vec<String>) = (run.lines().map(head).collect(), eval.lines().map(head).collect());
+    assert_eq!(r.len(), 121, "a header and one row per frame");
+    assert_eq!(r.len(), e.len());
+    for (a, b) in r.iter().zip(&e) {
+        assert_eq!(a, b, "fme run and fme eval differ");
+    }
+    // Not a trivial agreement: most frames carry an estimate with fish in it.
+    let with_value = r.iter().skip(1).filter(|l| l.split(',').nth(2).is_some_and(|v| !v.is_empty())).count();
+    assert!(with_value > 80, "{with_value} frames with a value");
 }

@@ -35,7 +35,7 @@ fn default_recovers_a_track_after_a_gap_sort_does_not() {
 #[test]
 fn lost_tracks_expire_after_max_lost() {
     let mut cfg = TrackerConfig::default_preset();
-    cfg.max_lost_s = 0.2;
+    cfg.max_age_s = 0.2;
     let mut tr = Tracker::new(cfg);
     let mut last = 0;
     for k in 0..40 {

@@ -1,8 +1,9 @@
 //! Bad input: malformed rows, negative sizes, NaN, frames out of order, time going backwards.
 
+use fme::cli::ConfigArgs;
 use fme::cli::track::{TrackArgs, run};
 use fme::geometry::PixelBox;
-use fme::track::{Detection, TrackError, Tracker, TrackerConfig};
+use fme::track::{Detection, Preset, TrackError, Tracker, TrackerConfig};
 use fme::units::Seconds;
 use std::path::PathBuf;
 
@@ -10,8 +11,8 @@ fn args(det: PathBuf, out: PathBuf) -> TrackArgs {
     TrackArgs {
         det: Some(det),
         out: Some(out),
-        preset: "default".into(),
-        config: None,
+        preset: None,
+        config: ConfigArgs::default(),
         fps: 30.0,
         gt: None,
         hyp: None,
@@ -43,9 +44,10 @@ fn cli_errors_name_file_and_line() {
     let err = run(args(dir.path().join("missing.txt"), dir.path().join("o.txt"))).expect_err("missing");
     assert!(format!("{err:#}").contains("missing.txt"));
     let mut a = args(dir.path().join("det0.txt"), dir.path().join("o.txt"));
-    a.preset = "bogus".into();
+    a.config.set = vec!["tracker.preset=bogus".into()];
     let err = run(a).expect_err("preset");
     assert_eq!(fme::cli::exit_code(&err), 2);
+    assert!(format!("{err:#}").contains("tracker.preset"), "{err:#}");
 }
 
 #[test]
@@ -53,10 +55,10 @@ fn huge_frame_numbers_neither_allocate_nor_overflow() {
     let dir = tempfile::tempdir().expect("tempdir");
     let det = dir.path().join("det.txt");
     std::fs::write(&det, "1,-1,1,1,5,5,0.9\n4294967295,-1,1,1,5,5,0.9\n").expect("write");
-    for preset in ["sort", "default"] {
-        let out = dir.path().join(format!("{preset}.txt"));
+    for (name, preset) in [("sort", Preset::Sort), ("default", Preset::Default)] {
+        let out = dir.path().join(format!("{name}.txt"));
         let mut a = args(det.clone(), out.clone());
-        a.preset = preset.into();
+        a.preset = Some(preset);
         run(a).expect("runs");
         let text = std::fs::read_to_string(out).expect("read");
         assert!(text.lines().all(|l| l.starts_with("1,") || l.starts_with("4294967295,")), "{text}");

@@ -56,14 +56,14 @@ fn tune_cli_runs_a_grid_on_sequence_folders() {
     }
     std::fs::write(sdir.join("gt").join("gt.txt"), gt).expect("write");
     let grid = dir.path().join("grid.toml");
-    std::fs::write(&grid, "iou_thresh = [0.2, 0.5]\nmin_hits = [1, 3]\n").expect("write");
+    std::fs::write(&grid, "iou_threshold = [0.2, 0.5]\nmin_hits = [1, 3]\n").expect("write");
     let args = |grid: Option<std::path::PathBuf>| TuneArgs {
         sequences: vec![sdir.clone()],
         grid,
         metric: TuneMetric::Idf1,
         jobs: Some(2),
-        preset: "default".into(),
-        config: None,
+        preset: None,
+        config: fme::cli::ConfigArgs::default(),
         seed: 1,
         miss: 0.05,
         jitter: 0.05,

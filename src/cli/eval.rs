@@ -1,88 +1,92 @@
-//! `fme eval`: Run the estimator on a sequence and score it against ground truth.
+//! `fme eval`: run the daemon's pipeline on a recorded sequence and score it against ground truth.
 
-use crate::eval::{
-    BoxesChoice, DepthChoice, DepthSample, EvalOptions, EvalReport, FitChoice, evaluate, plot, write_series,
-    write_tracks,
-};
+use super::{ConfigArgs, set_text, set_value};
+use crate::eval::{BoxesChoice, DepthChoice, EvalOptions, EvalReport, evaluate, plot, write_series, write_tracks};
+use crate::metric::{DepthSample, FitMethod};
 use crate::motion::{AlongRay, SpeedMethod};
-use crate::postprocess::{BoxAnchor, PostprocessConfig};
 use crate::sequence::Sequence;
-use crate::units::MetresPerSecond;
-use crate::units::Seconds;
 use anyhow::Context;
 use std::path::PathBuf;
 
-/// Arguments of `fme eval`.
+/// Arguments of `fme eval`. Everything about the pipeline comes from the one config (`--config`,
+/// `--set`); the convenience flags below are `--set`s and carry no defaults of their own.
 #[derive(Debug, clap::Args)]
 pub struct EvalArgs {
     /// Sequence folder (MOTChallenge layout plus `gt/world.csv`, `depth/`, `meta.json`).
     #[arg(long)]
     pub sequence: PathBuf,
-    /// Box source: `gt` (gt/gt.txt with its ids), `tracker`, `model`, or a MOTChallenge track FILE.
+    /// The configuration.
+    #[command(flatten)]
+    pub config: ConfigArgs,
+    /// Box source: `model` (the pipeline's detector and tracker), `gt` (gt/gt.txt with its ids),
+    /// `tracker` (the tracker on det/det.txt, or on noisy detections made from ground truth), or a
+    /// MOTChallenge track FILE.
     #[arg(long, default_value = "gt")]
     pub boxes: BoxesChoice,
-    /// Depth source: `gt` (depth/ maps), `relative-gt` (noisy relative inverse depth + metric fit), `model`.
+    /// Depth source: `model` (the pipeline's depth network and fit), `gt` (depth/ maps),
+    /// `relative-gt` (noisy relative inverse depth made from depth/, then the fit).
     #[arg(long, value_enum, default_value_t = DepthChoice::Gt)]
     pub depth: DepthChoice,
-    /// Metric fit of relative inverse depth (eq. 1-2 and the paper's Table 4 regressors).
-    #[arg(long, value_enum, default_value_t = FitChoice::Linear)]
-    pub fit: FitChoice,
-    /// Turn post-processing (eq. 3 and eq. 4) off.
+    /// Run the networks (or read ground truth) on every frame instead of the configured rates
+    /// (`--set detector.rate_hz=0 --set depth.rate_hz=0`).
+    #[arg(long)]
+    pub every_frame: bool,
+    /// The paper's settings: frame-to-frame speed from the depth change, every fish at once, eq. 3
+    /// and eq. 4 on (`--set`s of postprocess.box_fluctuation, motion.speed_span_s, motion.min_age_s,
+    /// motion.along_ray; other flags still apply).
+    #[arg(long)]
+    pub paper: bool,
+    /// Post-processing (eq. 3 and eq. 4) off (`--set postprocess.box_fluctuation=false --set
+    /// postprocess.depth_jump=false`).
     #[arg(long)]
     pub no_postprocess: bool,
+    /// The box-fluctuation detector (eq. 3) on (`--set postprocess.box_fluctuation=true`).
+    #[arg(long)]
+    pub box_fluctuation: bool,
+    /// Metric fit (`--set depth.fit=...`).
+    #[arg(long, value_enum)]
+    pub fit: Option<FitMethod>,
+    /// How a fish's depth is read (`--set depth.sample=...`).
+    #[arg(long, value_enum)]
+    pub depth_sample: Option<DepthSample>,
+    /// Speed span, s (`--set motion.speed_span_s=...`).
+    #[arg(long)]
+    pub speed_span: Option<f64>,
+    /// A fish enters the mean once tracked this long, s (`--set motion.min_age_s=...`).
+    #[arg(long)]
+    pub min_age: Option<f64>,
+    /// Where the speed along the line of sight comes from (`--set motion.along_ray=...`).
+    #[arg(long, value_enum)]
+    pub along_ray: Option<AlongRay>,
+    /// Chord or regression over the span (`--set motion.speed_method=...`).
+    #[arg(long, value_enum)]
+    pub speed_method: Option<SpeedMethod>,
+    /// The detector (`--set detector.model=...`).
+    #[arg(long)]
+    pub det_model: Option<PathBuf>,
+    /// The depth network (`--set depth.model=...`).
+    #[arg(long)]
+    pub depth_model: Option<PathBuf>,
+    /// ONNX Runtime threads of both networks (`--set detector.threads=N --set depth.threads=N`).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Tracker preset (`--set tracker.preset=...`).
+    #[arg(long, value_enum)]
+    pub tracker: Option<crate::track::Preset>,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
     /// Write a PNG of estimated vs true swarm speed over time.
     #[arg(long, value_name = "FILE.png")]
     pub plot: Option<PathBuf>,
-    /// Write the per-frame series (`frame,t,true_mps,est_mps,n_fish`) as CSV.
+    /// Write the per-frame series: the columns of `fme run --series`, then `true_mps` (the truth at
+    /// `t - latency`) and `true_now_mps` (at `t`).
     #[arg(long, value_name = "FILE.csv")]
     pub series: Option<PathBuf>,
     /// Write one row per tracked fish and frame (`frame,t,id,u,v,w,h,depth_raw_m,depth_m,speed_mps`:
-    /// box centre and size in pixels after eq. 3, depth before and after eq. 4 and the smoothing) as
-    /// CSV, for diagnosing the speed error fish by fish.
+    /// box centre and size in pixels after eq. 3, depth before and after eq. 4 and the smoothing).
     #[arg(long, value_name = "FILE.csv")]
     pub tracks: Option<PathBuf>,
-    /// Speed span in seconds (0 = frame to frame, the paper's choice; default 1).
-    #[arg(long)]
-    pub speed_span: Option<f64>,
-    /// A fish enters the swarm mean once it has been tracked this many seconds (0 = at once, as the
-    /// paper; default 1, `--paper` 0).
-    #[arg(long)]
-    pub min_age: Option<f64>,
-    /// The paper's settings: frame-to-frame speed from the depth change, every fish at once, eq. 3 and eq. 4
-    /// on (other flags still apply).
-    #[arg(long)]
-    pub paper: bool,
-    /// Turn the box-fluctuation detector (eq. 3) on (off by default: it raised the RMSE in our measurements).
-    #[arg(long, conflicts_with = "no_box_fluctuation")]
-    pub box_fluctuation: bool,
-    /// How a fish's depth is read: `centre` (5x5 median at the box centre, the paper), `box` (near
-    /// quarter of the central half of the box) or `visible` (as `box`, minus where other fish's boxes
-    /// cover it; no depth for a fish hidden that way). Default: `visible` with `--depth model`, else `centre`.
-    #[arg(long, value_enum)]
-    pub depth_sample: Option<DepthSample>,
-    /// Speed from the chord over the span (the paper, with span 0) or a least-squares regression.
-    #[arg(long, value_enum, default_value_t = SpeedMethod::Chord)]
-    pub speed_method: SpeedMethod,
-    /// Where each fish's speed along the line of sight comes from: `heading` (its speed across the
-    /// image over the box's foreshortening: fish swim head first) or `depth` (the change of its depth,
-    /// the paper). Default `heading`, `depth` with `--paper`.
-    #[arg(long, value_enum)]
-    pub along_ray: Option<AlongRay>,
-    /// Per-fish speeds above this (m/s) are glitches left out of the mean.
-    #[arg(long, default_value_t = 10.0)]
-    pub max_speed: f64,
-    /// Turn only the box-fluctuation detector (eq. 3) off.
-    #[arg(long)]
-    pub no_box_fluctuation: bool,
-    /// Turn only the depth-jump detector (eq. 4) off.
-    #[arg(long)]
-    pub no_depth_jump: bool,
-    /// What stays put when eq. 3 replaces a box dimension.
-    #[arg(long, value_enum, default_value_t = BoxAnchor::LeastMoved)]
-    pub box_anchor: BoxAnchor,
     /// relative-gt: foul this many reference objects (their relative depth reads 50% nearer).
     #[arg(long, default_value_t = 0)]
     pub foul_refs: usize,
@@ -92,31 +96,67 @@ pub struct EvalArgs {
     /// relative-gt: amplitude of the smooth multiplicative distortion of the inverse depth.
     #[arg(long, default_value_t = 0.03)]
     pub rel_distortion: f64,
-    /// `--boxes model`: the detector (YOLO-layout ONNX).
-    #[arg(long, default_value = "models/fish_det_int8.onnx")]
-    pub det_model: PathBuf,
-    /// `--boxes model`: minimum detection confidence, 0..1.
-    #[arg(long, default_value_t = 0.3)]
-    pub det_conf: f32,
-    /// `--depth model`: the relative-depth network (MiDaS-layout ONNX, ImageNet normalisation).
-    #[arg(long, default_value = "models/fish_depth_int8.onnx")]
-    pub depth_model: PathBuf,
-    /// `--depth model`: also run the depth network on the mirrored frame and average the maps.
-    #[arg(long)]
-    pub depth_flip: bool,
-    /// ONNX Runtime intra-op threads.
-    #[arg(long, default_value_t = 2)]
-    pub threads: usize,
-    /// `--boxes tracker|model`: tracker preset (`default` or `sort`).
-    #[arg(long, default_value = "default")]
-    pub tracker: String,
-    /// Time constant (s) of the per-track depth smoothing after eq. 4 (0 = off; default: 1 s with
-    /// `--depth model`, off otherwise).
-    #[arg(long)]
-    pub depth_smoothing: Option<f64>,
-    /// `--boxes tracker|model`: tracker keys over the preset (TOML, as `fme track --config`).
-    #[arg(long, value_name = "FILE")]
-    pub tracker_config: Option<PathBuf>,
+}
+
+impl EvalArgs {
+    /// The convenience flags as `--set` assignments.
+    fn sugar(&self) -> Vec<String> {
+        let mut s = Vec::new();
+        if self.every_frame {
+            s.push(set_value("detector.rate_hz", 0));
+            s.push(set_value("depth.rate_hz", 0));
+        }
+        if self.paper {
+            s.push(set_value("postprocess.box_fluctuation", true));
+            s.push(set_value("motion.speed_span_s", 0));
+            s.push(set_value("motion.min_age_s", 0));
+            s.push(set_text("motion.along_ray", "depth"));
+        }
+        if self.no_postprocess {
+            s.push(set_value("postprocess.box_fluctuation", false));
+            s.push(set_value("postprocess.depth_jump", false));
+        }
+        if self.box_fluctuation {
+            s.push(set_value("postprocess.box_fluctuation", true));
+        }
+        if let Some(f) = &self.fit {
+            s.push(set_text("depth.fit", &name(f)));
+        }
+        if let Some(v) = &self.depth_sample {
+            s.push(set_text("depth.sample", &name(v)));
+        }
+        if let Some(v) = self.speed_span {
+            s.push(set_value("motion.speed_span_s", v));
+        }
+        if let Some(v) = self.min_age {
+            s.push(set_value("motion.min_age_s", v));
+        }
+        if let Some(v) = &self.along_ray {
+            s.push(set_text("motion.along_ray", &name(v)));
+        }
+        if let Some(v) = &self.speed_method {
+            s.push(set_text("motion.speed_method", &name(v)));
+        }
+        if let Some(p) = &self.det_model {
+            s.push(set_text("detector.model", &p.to_string_lossy()));
+        }
+        if let Some(p) = &self.depth_model {
+            s.push(set_text("depth.model", &p.to_string_lossy()));
+        }
+        if let Some(n) = self.threads {
+            s.push(set_value("detector.threads", n));
+            s.push(set_value("depth.threads", n));
+        }
+        if let Some(v) = &self.tracker {
+            s.push(set_text("tracker.preset", &name(v)));
+        }
+        s
+    }
+}
+
+/// The config name of a value enum (`robust`, `relative-gt`, ...): the name clap accepts.
+fn name<T: clap::ValueEnum>(v: &T) -> String {
+    v.to_possible_value().map(|p| p.get_name().to_string()).unwrap_or_default()
 }
 
 /// The human-readable report, one line per measure.
@@ -125,16 +165,20 @@ fn table(r: &EvalReport) -> String {
     let opt = |v: Option<f64>, p: usize| v.map_or("-".to_string(), |x| format!("{x:.p$}"));
     lines.push(format!("sequence          {}", r.sequence));
     lines.push(format!(
-        "input             boxes {}, depth {:?}{}, post-processing {}",
+        "input             boxes {}, depth {:?}{}, post-processing {}, detector {} Hz, depth {} Hz",
         r.boxes,
         r.depth,
         r.fit.map_or(String::new(), |f| format!(", fit {f:?}")),
-        if r.postprocess { "on" } else { "off" }
+        if r.postprocess { "on" } else { "off" },
+        rate(r.rates_hz[0]),
+        rate(r.rates_hz[1]),
     ));
     lines.push(format!("frames scored     {} (mean {:.1} fish)", r.frames, r.mean_fish));
-    lines.push(format!("                  {:>10} {:>10}", "fme", "no-postp"));
-    lines.push(format!("speed RMSE m/s    {:>10.4} {:>10.4}", r.speed_rmse_mps, r.speed_rmse_raw_mps));
-    lines.push(format!("DistCorr          {:>10.4} {:>10.4}", r.speed_distcorr, r.speed_distcorr_raw));
+    lines.push(format!(
+        "speed RMSE m/s    {:.4} (truth at t - {:.2} s latency), {:.4} (truth at t)",
+        r.speed_rmse_mps, r.latency_s, r.speed_rmse_now_mps
+    ));
+    lines.push(format!("DistCorr          {:.4}", r.speed_distcorr));
     lines.push(format!(
         "error 95% m/s     [{:.4}, {:.4}]  bias {:.4}",
         r.error_ci95_mps[0], r.error_ci95_mps[1], r.speed_bias_mps
@@ -161,6 +205,7 @@ fn table(r: &EvalReport) -> String {
         ));
     }
     lines.push(format!("corrections       {} boxes (eq. 3), {} depths (eq. 4)", r.boxes_corrected, r.depths_corrected));
+    lines.push(format!("pipeline CPU      {:.2} ms per frame", r.cpu_ms_per_frame));
     if let Some(d) = &r.detection {
         lines.push(format!(
             "detection         precision {:.3}  recall {:.3}  (IoU 0.5; {} TP, {} FP, {} FN)",
@@ -183,76 +228,31 @@ fn table(r: &EvalReport) -> String {
     lines.join("\n")
 }
 
+fn rate(hz: f64) -> String {
+    if hz > 0.0 { format!("{hz}") } else { "every frame".into() }
+}
+
 /// Runs `fme eval`.
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
-    if let Some(span) = args.speed_span.filter(|s| !(s.is_finite() && *s >= 0.0)) {
-        return Err(super::UsageError(format!("--speed-span must be >= 0 seconds, got {span}")).into());
-    }
     if !(args.rel_noise.is_finite() && args.rel_noise >= 0.0 && args.rel_distortion.is_finite()) {
         return Err(super::UsageError("--rel-noise must be >= 0 and --rel-distortion finite".into()).into());
     }
-    if !(0.0..=1.0).contains(&args.det_conf) {
-        return Err(super::UsageError(format!("--det-conf must be within 0..1, got {}", args.det_conf)).into());
-    }
-    let tracker = super::track::load_config(&args.tracker, args.tracker_config.as_deref())
-        .context("--tracker / --tracker-config")?;
+    let (cfg, _) = args.config.load(&args.sugar())?;
     let seq =
         Sequence::open(&args.sequence).with_context(|| format!("opening sequence {}", args.sequence.display()))?;
     let mut opts = EvalOptions {
         boxes: args.boxes.clone(),
         depth: args.depth,
-        fit: args.fit,
-        postprocess: match (args.no_postprocess, args.paper) {
-            (true, _) => PostprocessConfig::off(),
-            (false, true) => PostprocessConfig::paper(),
-            (false, false) => PostprocessConfig::default(),
-        },
         foul_refs: args.foul_refs,
-        depth_sample: args.depth_sample.unwrap_or(if args.depth == DepthChoice::Model {
-            DepthSample::Visible
-        } else {
-            DepthSample::Centre
-        }),
-        threads: args.threads,
-        tracker,
+        track_rows: args.tracks.is_some(),
         ..Default::default()
     };
-    opts.detector.model = crate::infer::runtime::resolve_model(&args.det_model);
-    opts.detector.conf_threshold = args.det_conf;
-    opts.depth_model.model = crate::infer::runtime::resolve_model(&args.depth_model);
-    opts.depth_model.flip = args.depth_flip;
-    if args.paper {
-        opts.motion.speed_span = Seconds(0.0);
-        opts.motion.min_age = Seconds(0.0);
-    }
-    if let Some(span) = args.speed_span {
-        opts.motion.speed_span = Seconds(span);
-    }
-    if let Some(a) = args.min_age {
-        opts.motion.min_age = Seconds(a);
-    }
-    opts.motion.speed_method = args.speed_method;
-    opts.motion.along_ray = args.along_ray.unwrap_or(if args.paper { AlongRay::Depth } else { opts.motion.along_ray });
-    opts.motion.max_speed = MetresPerSecond(args.max_speed);
-    opts.postprocess.box_anchor = args.box_anchor;
-    opts.postprocess.box_fluctuation =
-        (opts.postprocess.box_fluctuation || args.box_fluctuation) && !args.no_box_fluctuation && !args.no_postprocess;
-    opts.postprocess.depth_jump &= !args.no_depth_jump;
-    let default_smoothing =
-        if args.depth == DepthChoice::Model { crate::postprocess::ESTIMATED_DEPTH_SMOOTHING.0 } else { 0.0 };
-    let smoothing = args.depth_smoothing.unwrap_or(default_smoothing);
-    if !(smoothing.is_finite() && smoothing >= 0.0) {
-        return Err(super::UsageError(format!("--depth-smoothing must be >= 0 seconds, got {smoothing}")).into());
-    }
-    opts.postprocess.depth_smoothing = Seconds(smoothing);
-    opts.motion.validate().map_err(|e| super::UsageError(e.into()))?;
     opts.relative.pixel_noise = args.rel_noise;
     opts.relative.low_freq = args.rel_distortion;
     opts.relative.seed = seq.meta.seed ^ 0x5eed;
-    opts.track_rows = args.tracks.is_some();
     let outputs: Vec<&PathBuf> = [&args.tracks, &args.series, &args.plot].into_iter().flatten().collect();
     let created = open_outputs(&outputs)?;
-    let report = evaluate(&seq, &opts).inspect_err(|_| remove_all(&created))?;
+    let report = evaluate(&seq, &cfg, &opts).inspect_err(|_| remove_all(&created))?;
     if let Some(p) = &args.tracks {
         write_tracks(p, &report.tracks)?;
     }

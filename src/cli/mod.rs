@@ -1,6 +1,7 @@
 //! Command-line front ends of the `fme` subcommands. Each file holds one subcommand's arguments and
 //! its `run` function; `src/main.rs` only parses and dispatches.
 
+pub mod config;
 pub mod eval;
 pub mod run;
 pub mod synth;
@@ -26,4 +27,38 @@ pub fn write_stdout(text: &str) -> anyhow::Result<()> {
         Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(anyhow::Error::new(e).context("writing to stdout")),
         _ => Ok(()),
     }
+}
+
+/// The one config of every command that estimates activity: a file and `--set` overrides.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ConfigArgs {
+    /// Configuration file (TOML; see config/fme.toml for every key). Default: the built-in
+    /// defaults, which config/fme.toml spells out.
+    #[arg(long, short, value_name = "FILE")]
+    pub config: Option<std::path::PathBuf>,
+    /// Override one key after the file: `--set section.key=value` (repeatable), e.g.
+    /// `--set detector.rate_hz=30`. Values are TOML (`10`, `true`, `"text"`) or plain text.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+}
+
+impl ConfigArgs {
+    /// Loads the config with the command's convenience flags (`sugar`, as `--set` assignments)
+    /// applied first and the explicit `--set`s after them. Errors are [`UsageError`]s (exit 2) that
+    /// name the file and line, or the `--set`.
+    pub fn load(&self, sugar: &[String]) -> anyhow::Result<(crate::config::Config, String)> {
+        let sets: Vec<String> = sugar.iter().chain(&self.set).cloned().collect();
+        crate::config::Config::load_with(self.config.as_deref(), &sets)
+            .map_err(|e| anyhow::Error::new(UsageError(e.to_string())))
+    }
+}
+
+/// A `--set` assignment of a text value, quoted as a TOML string (paths, names).
+pub fn set_text(key: &str, value: &str) -> String {
+    format!("{key}={}", toml_edit::Value::from(value))
+}
+
+/// A `--set` assignment of a value that is already TOML (a number, a bool, an enum name).
+pub fn set_value(key: &str, value: impl std::fmt::Display) -> String {
+    format!("{key}={value}")
 }

@@ -1,70 +1,75 @@
 //! `fme run`: Run the edge daemon: camera or recording in, PLC and serial out.
 
 use crate::capture::{CaptureError, FrameSource, RecordedSource, V4l2Source};
-use crate::cli::UsageError;
-use crate::config::{Config, ConfigError, ModbusMode};
+use crate::cli::{ConfigArgs, UsageError, set_text, set_value};
+use crate::config::Config;
 use crate::service::{self, Daemon, RunOptions};
 use anyhow::Context as _;
 use std::path::PathBuf;
 
-/// Arguments of `fme run`.
+/// Arguments of `fme run`. The flags other than `--max-frames` and `--series` are `--set`s.
 #[derive(Debug, clap::Args)]
 pub struct RunArgs {
-    /// Configuration file (TOML; see config/fme.toml for every key).
-    #[arg(long, short)]
-    pub config: PathBuf,
-    /// Frame source, overriding `source.path`: a V4L2 device (/dev/videoN) or a MOTChallenge sequence directory.
+    /// The configuration.
+    #[command(flatten)]
+    pub config: ConfigArgs,
+    /// Frame source (`--set source.path=...`): a V4L2 device (/dev/videoN) or a MOTChallenge
+    /// sequence directory.
     #[arg(long)]
     pub source: Option<PathBuf>,
-    /// Serve Modbus TCP on HOST:PORT, overriding `output.modbus.mode` and `output.modbus.listen`.
+    /// Serve Modbus TCP on HOST:PORT (`--set output.modbus.mode=tcp-server --set
+    /// output.modbus.listen=...`).
     #[arg(long)]
     pub modbus_listen: Option<String>,
-    /// Recordings: replay as fast as possible instead of at the sequence's frame rate.
+    /// Recordings: replay as fast as possible (`--set source.realtime=false`); frames then wait for
+    /// the pipeline instead of being dropped.
     #[arg(long)]
     pub fast: bool,
-    /// Recordings: stop at the end instead of looping.
+    /// Recordings: stop at the end (`--set source.loop=false`).
     #[arg(long)]
     pub no_loop: bool,
+    /// Print a live one-line view of the activity index on stderr (`--set service.live_view_s=0.5`).
+    #[arg(long)]
+    pub live: bool,
     /// Stop after this many processed frames (benchmarks).
     #[arg(long)]
     pub max_frames: Option<u64>,
-    /// Print a live one-line view of the activity index on stderr.
-    #[arg(long)]
-    pub live: bool,
+    /// Write the per-frame series the pipeline computed as CSV
+    /// (`frame,t,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,latency_s,too_few_fish,uncalibrated`).
+    #[arg(long, value_name = "FILE.csv")]
+    pub series: Option<PathBuf>,
 }
 
-fn usage(e: ConfigError) -> anyhow::Error {
-    anyhow::Error::new(UsageError(e.to_string()))
-}
-
-/// Loads the config and applies the command-line overrides (re-validated, errors name the flag).
-pub fn effective_config(args: &RunArgs) -> anyhow::Result<(Config, String)> {
-    let text = std::fs::read_to_string(&args.config)
-        .map_err(|e| UsageError(format!("cannot read config {}: {e}", args.config.display())))?;
-    let mut cfg = Config::parse(&text, &args.config).map_err(usage)?;
-    if let Some(s) = &args.source {
-        cfg.source.path = s.clone();
-    }
-    if let Some(l) = &args.modbus_listen {
-        if !crate::config::is_host_port(l) {
-            return Err(UsageError(format!("--modbus-listen: must be HOST:PORT, got {l:?}")).into());
+impl RunArgs {
+    /// The convenience flags as `--set` assignments.
+    fn sugar(&self) -> anyhow::Result<Vec<String>> {
+        let mut s = Vec::new();
+        if let Some(p) = &self.source {
+            s.push(set_text("source.path", &p.to_string_lossy()));
         }
-        cfg.output.modbus.mode = ModbusMode::TcpServer;
-        cfg.output.modbus.listen = l.clone();
+        if let Some(l) = &self.modbus_listen {
+            if !crate::config::is_host_port(l) {
+                return Err(UsageError(format!("--modbus-listen: must be HOST:PORT, got {l:?}")).into());
+            }
+            s.push(set_text("output.modbus.mode", "tcp-server"));
+            s.push(set_text("output.modbus.listen", l));
+        }
+        if self.fast {
+            s.push(set_value("source.realtime", false));
+        }
+        if self.no_loop {
+            s.push(set_value("source.loop", false));
+        }
+        if self.live {
+            s.push(set_value("service.live_view_s", 0.5));
+        }
+        Ok(s)
     }
-    if args.fast {
-        cfg.source.realtime = false;
-    }
-    if args.no_loop {
-        cfg.source.looping = false;
-    }
-    if args.live && cfg.service.live_view_s == 0.0 {
-        cfg.service.live_view_s = 0.5;
-    }
-    if let Err((key, msg)) = cfg.validate() {
-        return Err(UsageError(format!("after command-line overrides: key `{key}`: {msg}")).into());
-    }
-    Ok((cfg, text))
+}
+
+/// Loads the config with the command-line overrides; errors name the file and line, or the flag.
+pub fn effective_config(args: &RunArgs) -> anyhow::Result<(Config, String)> {
+    args.config.load(&args.sugar()?)
 }
 
 /// Opens the frame source. A missing camera is not fatal (it is retried with backoff and reported
@@ -98,7 +103,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let source = open_source(&cfg)?;
     let pipeline = service::build_pipeline(&cfg)?;
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("tokio runtime")?;
-    let opts = RunOptions { max_frames: args.max_frames };
+    let opts = RunOptions { max_frames: args.max_frames, series: args.series.clone() };
     rt.block_on(async move {
         let mut daemon = Daemon::start(cfg, text, source, pipeline, opts).await?;
         let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())

@@ -1,13 +1,13 @@
 //! `fme track`: Run the tracker on MOTChallenge detections.
 
-use crate::cli::UsageError;
+use crate::cli::{ConfigArgs, UsageError, set_text};
 use crate::mot::io::{self, MotRow, ReadOptions};
 use crate::mot::{MotAccumulator, MotMetrics};
-use crate::track::{Detection, Tracker, TrackerConfig};
+use crate::track::{Detection, Preset, Tracker, TrackerConfig};
 use crate::units::Seconds;
 use anyhow::Context;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Arguments of `fme track`.
 #[derive(Debug, clap::Args)]
@@ -19,12 +19,12 @@ pub struct TrackArgs {
     /// nor `--gt` is given).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Tracker preset: `sort` (exact SORT) or `default`.
-    #[arg(long, default_value = "default")]
-    pub preset: String,
-    /// TOML file with tracker keys (top level or `[track]`), applied over the preset.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
+    /// The configuration: its `[tracker]` section is the tracker's.
+    #[command(flatten)]
+    pub config: ConfigArgs,
+    /// Tracker preset (`--set tracker.preset=...`): `sort` (exact SORT) or `default`.
+    #[arg(long, value_enum)]
+    pub preset: Option<Preset>,
     /// Frame rate of the detections, frames per second (frame times are `(frame - 1) / fps`).
     #[arg(long, default_value_t = 30.0)]
     pub fps: f64,
@@ -39,13 +39,13 @@ pub struct TrackArgs {
     pub json: bool,
 }
 
-/// Loads the tracker configuration of a preset name and an optional TOML file.
-pub fn load_config(preset: &str, file: Option<&Path>) -> anyhow::Result<TrackerConfig> {
-    let base = TrackerConfig::preset(preset)
-        .ok_or_else(|| UsageError(format!("unknown preset `{preset}` (expected sort or default)")))?;
-    let Some(path) = file else { return Ok(base) };
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    TrackerConfig::from_toml(&text, base).map_err(|e| UsageError(format!("{}: {e}", path.display())).into())
+/// The tracker settings of the one config, with `--preset` as a `--set`.
+pub fn tracker_config(config: &ConfigArgs, preset: Option<Preset>) -> anyhow::Result<TrackerConfig> {
+    let sugar: Vec<String> = preset
+        .iter()
+        .map(|p| set_text("tracker.preset", if *p == Preset::Sort { "sort" } else { "default" }))
+        .collect();
+    Ok(config.load(&sugar)?.0.tracker)
 }
 
 /// Runs the tracker over detection rows; returns result rows `(frame, id, box, score)`.
@@ -126,7 +126,7 @@ pub fn run(args: TrackArgs) -> anyhow::Result<()> {
         io::read_file(hyp, ReadOptions::default())?
     } else {
         let det = args.det.as_deref().ok_or_else(|| UsageError("--det is required".into()))?;
-        let cfg = load_config(&args.preset, args.config.as_deref())?;
+        let cfg = tracker_config(&args.config, args.preset)?;
         let mut dets = io::read_file(det, ReadOptions { require_sorted: true })?;
         let rows = track_rows(cfg, &mut dets, args.fps)?;
         if let Some(out) = &args.out {

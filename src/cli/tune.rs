@@ -1,7 +1,8 @@
 //! `fme tune`: Grid-search tracker thresholds on sequences with ground truth.
 
+use crate::cli::ConfigArgs;
 use crate::cli::UsageError;
-use crate::cli::track::{METRICS_HEADER, load_config, metrics_line};
+use crate::cli::track::{METRICS_HEADER, metrics_line, tracker_config};
 use crate::mot::MotMetrics;
 use crate::sequence::{Meta, SeqInfo, read_gt, read_world};
 use crate::track::TrackerConfig;
@@ -35,12 +36,12 @@ pub struct TuneArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub jobs: Option<usize>,
-    /// Preset the grid varies (`default` or `sort`).
-    #[arg(long, default_value = "default")]
-    pub preset: String,
-    /// TOML tracker keys applied over the preset before the grid.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
+    /// The configuration: the grid varies its `[tracker]` section.
+    #[command(flatten)]
+    pub config: ConfigArgs,
+    /// Tracker preset the grid varies (`--set tracker.preset=...`).
+    #[arg(long, value_enum)]
+    pub preset: Option<crate::track::Preset>,
     /// Seed of the synthetic detector noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -119,7 +120,7 @@ fn key(m: &MotMetrics, metric: TuneMetric) -> (f64, f64) {
 
 /// Runs `fme tune`.
 pub fn run(args: TuneArgs) -> anyhow::Result<()> {
-    let base = load_config(&args.preset, args.config.as_deref())?;
+    let base = tracker_config(&args.config, args.preset)?;
     let grid = match &args.grid {
         Some(p) => {
             let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
@@ -220,7 +221,8 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
     }
     writeln!(rep, "{:<8} {}  (preset sort)", "sort", metrics_line(&score(TrackerConfig::sort())))?;
     writeln!(rep, "{:<8} {}  (preset default)", "default", metrics_line(&score(TrackerConfig::default_preset())))?;
-    writeln!(rep, "# best settings, for --config:\n[track]\npreset = \"{}\"", args.preset)?;
+    let preset = if base.preset == crate::track::Preset::Sort { "sort" } else { "default" };
+    writeln!(rep, "# best settings, for the config file:\n[tracker]\npreset = \"{preset}\"")?;
     for (k, v) in &results[0].0 {
         writeln!(rep, "{k} = {v}")?;
     }

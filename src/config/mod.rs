@@ -1,14 +1,20 @@
-//! The TOML configuration: one section per pipeline stage, validated with errors naming the key.
+//! The one configuration: a TOML file whose sections mirror the pipeline, read by every command.
 //!
-//! [`Config::load`] parses `config/fme.toml`-style files. Every error names the file, the line and
+//! [`Config::load`] reads `config/fme.toml`-style files; [`Config::load_with`] adds command-line
+//! `--set section.key=value` overrides. Every error names the file (or the `--set`), the line and
 //! the dotted key (`output.modbus.mode`), so a technician can fix the file without reading code.
+//! The pipeline sections are the stage modules' own types; this module composes and checks them.
 
+mod lines;
 mod schema;
 mod stages;
 
 pub use schema::*;
 
 use std::path::{Path, PathBuf};
+
+/// Where a configuration came from, for messages.
+const DEFAULTS: &str = "(built-in defaults)";
 
 /// A configuration error: the file, the 1-based line (0 when unknown), the dotted key and what is wrong.
 #[derive(Debug, thiserror::Error)]
@@ -33,6 +39,14 @@ pub enum ConfigError {
         /// What is wrong.
         message: String,
     },
+    /// A `--set` override is malformed or gives a bad value.
+    #[error("--set {assignment}: {message}")]
+    Override {
+        /// The override as given.
+        assignment: String,
+        /// What is wrong.
+        message: String,
+    },
 }
 
 impl ConfigError {
@@ -40,7 +54,7 @@ impl ConfigError {
     pub fn key(&self) -> Option<&str> {
         match self {
             Self::Invalid { key, .. } => Some(key),
-            Self::Read { .. } => None,
+            Self::Read { .. } | Self::Override { .. } => None,
         }
     }
 }
@@ -48,25 +62,74 @@ impl ConfigError {
 impl Config {
     /// Reads and validates a configuration file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text =
-            std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.to_path_buf(), source })?;
-        Self::parse(&text, path)
+        Self::load_with(Some(path), &[]).map(|(c, _)| c)
+    }
+
+    /// Reads `path` (`None`: the built-in defaults, which equal `config/fme.toml`), applies the
+    /// `--set section.key=value` overrides in order and validates the result. Returns the config and
+    /// the effective TOML text (the file with the overrides written in).
+    pub fn load_with(path: Option<&Path>, sets: &[String]) -> Result<(Self, String), ConfigError> {
+        match path {
+            Some(p) => {
+                let text =
+                    std::fs::read_to_string(p).map_err(|source| ConfigError::Read { path: p.to_path_buf(), source })?;
+                Self::from_text(&text, p, sets)
+            }
+            None => Self::from_text("", Path::new(DEFAULTS), sets),
+        }
     }
 
     /// Parses and validates configuration text; `path` is only used in messages.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
-        let config: Config = toml::from_str(text).map_err(|e| {
-            let (line, key) = match e.span() {
-                Some(span) => locate_span(text, span.start, e.message()),
-                None => (0, String::from("?")),
-            };
+        Self::from_text(text, path, &[]).map(|(c, _)| c)
+    }
+
+    fn from_text(text: &str, path: &Path, sets: &[String]) -> Result<(Self, String), ConfigError> {
+        let mut doc: toml_edit::DocumentMut = text.parse().map_err(|e: toml_edit::TomlError| {
+            let line = e.span().map_or(0, |s| lines::line_of(text, s.start));
+            let key = e.span().map_or_else(|| "?".to_string(), |s| lines::key_near(text, s.start));
             ConfigError::Invalid { path: path.to_path_buf(), line, key, message: e.message().trim().to_string() }
         })?;
-        if let Err((key, message)) = config.validate() {
-            let line = find_key_line(text, &key);
-            return Err(ConfigError::Invalid { path: path.to_path_buf(), line, key, message });
+        let mut set_keys = Vec::with_capacity(sets.len());
+        for a in sets {
+            set_keys.push((lines::apply_set(&mut doc, a)?, a.clone()));
         }
-        Ok(config)
+        let effective = if sets.is_empty() { text.to_string() } else { doc.to_string() };
+        // An error in a key a `--set` gave names the `--set`; others name the file and line.
+        let located = |key: String, message: String| {
+            let by_set = set_keys.iter().rev().find(|(k, _)| key == *k || key.starts_with(&format!("{k}.")));
+            match by_set {
+                Some((_, a)) => {
+                    ConfigError::Override { assignment: a.clone(), message: format!("key `{key}`: {message}") }
+                }
+                None => {
+                    ConfigError::Invalid { path: path.to_path_buf(), line: lines::key_line(text, &key), key, message }
+                }
+            }
+        };
+        let config: Config = serde_path_to_error::deserialize(toml::Deserializer::new(&effective)).map_err(|e| {
+            let message = e.inner().message().trim().to_string();
+            let mut key = e.path().to_string();
+            // An unknown key, or a key a section's own check names (`key `x``): name it in full.
+            let named = message.split("unknown field `").nth(1).or_else(|| message.split("key `").nth(1));
+            if let Some(name) = named.and_then(|r| r.split('`').next()) {
+                if key == "." || key.is_empty() {
+                    key = name.to_string();
+                } else if !key.ends_with(&format!(".{name}")) && key != name {
+                    key = format!("{key}.{name}");
+                }
+            }
+            located(key, message)
+        })?;
+        if let Err((key, message)) = config.validate() {
+            return Err(located(key, message));
+        }
+        Ok((config, effective))
+    }
+
+    /// The configuration as TOML (`fme config show`): every key with its value; reads back equal.
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).unwrap_or_else(|e| format!("# cannot show the config: {e}\n"))
     }
 
     /// Checks values that types alone cannot: ranges, consistency between keys.
@@ -77,9 +140,6 @@ impl Config {
         }
         fn positive(key: &str, v: f64) -> Result<(), (String, String)> {
             if v.is_finite() && v > 0.0 { Ok(()) } else { err(key, format!("must be a positive number, got {v}")) }
-        }
-        fn unit_interval(key: &str, v: f64) -> Result<(), (String, String)> {
-            if (0.0..=1.0).contains(&v) { Ok(()) } else { err(key, format!("must be between 0 and 1, got {v}")) }
         }
         let s = &self.source;
         if s.path.as_os_str().is_empty() {
@@ -103,56 +163,20 @@ impl Config {
         if s.reconnect_min_ms == 0 || s.reconnect_min_ms > s.reconnect_max_ms {
             return err("source.reconnect_min_ms", "must be > 0 and <= source.reconnect_max_ms");
         }
-        positive("detector.rate_hz", self.detector.rate_hz)?;
-        unit_interval("detector.confidence", self.detector.confidence)?;
-        unit_interval("detector.nms_iou", self.detector.nms_iou)?;
-        if self.detector.threads == 0 {
-            return err("detector.threads", "must be >= 1");
-        }
-        positive("depth.rate_hz", self.depth.rate_hz)?;
-        if self.depth.threads == 0 {
-            return err("depth.threads", "must be >= 1");
-        }
-        if self.depth.std.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
-            return err("depth.std", format!("must be positive, got {:?}", self.depth.std));
-        }
-        if self.depth.mean.iter().any(|v| !v.is_finite()) {
-            return err("depth.mean", format!("must be finite, got {:?}", self.depth.mean));
-        }
-        if !["default", "sort"].contains(&self.tracker.preset.as_str()) {
-            return err("tracker.preset", format!("must be default or sort, got {:?}", self.tracker.preset));
-        }
-        if self.tracker.max_tracks == 0 || self.tracker.max_tracks > crate::track::MAX_TRACKS {
-            return err("tracker.max_tracks", format!("must be 1..={}", crate::track::MAX_TRACKS));
-        }
-        unit_interval("tracker.iou_threshold", self.tracker.iou_threshold)?;
-        if self.tracker.min_hits == 0 {
-            return err("tracker.min_hits", "must be >= 1");
-        }
-        positive("tracker.max_age_s", self.tracker.max_age_s)?;
-        positive("postprocess.box_window_s", self.postprocess.box_window_s)?;
-        positive("postprocess.box_ewma_s", self.postprocess.box_ewma_s)?;
-        positive("postprocess.depth_jump_m", self.postprocess.depth_jump_m)?;
-        positive("postprocess.depth_window_s", self.postprocess.depth_window_s)?;
-        let sm = self.postprocess.depth_smoothing_s;
-        if !(sm.is_finite() && sm >= 0.0) {
-            return err("postprocess.depth_smoothing_s", format!("must be >= 0 s (0 = off), got {sm}"));
-        }
-        let m = &self.motion;
-        if !(m.body_length_m.is_finite() && m.body_length_m >= 0.0) {
-            return err("motion.body_length_m", format!("must be >= 0 m (0 = estimated), got {}", m.body_length_m));
-        }
-        if !(m.speed_span_s.is_finite() && m.speed_span_s >= 0.0) {
-            return err("motion.speed_span_s", format!("must be >= 0 s, got {}", m.speed_span_s));
-        }
-        if !(m.min_age_s.is_finite() && m.min_age_s >= 0.0) {
-            return err("motion.min_age_s", format!("must be >= 0 s (0 = off), got {}", m.min_age_s));
-        }
-        if !(m.body_width_ratio.is_finite() && (0.0..=0.5).contains(&m.body_width_ratio)) {
-            return err("motion.body_width_ratio", format!("must be within 0..=0.5, got {}", m.body_width_ratio));
-        }
-        positive("motion.max_speed_mps", m.max_speed_mps)?;
-        positive("motion.smoothing_s", self.motion.smoothing_s)?;
+        // The pipeline sections check themselves; their messages start with or name the key.
+        let keyed = |m: &str| (m.split_whitespace().next().unwrap_or("?").to_string(), m.to_string());
+        let infer_err = |e: crate::infer::InferError| match e {
+            crate::infer::InferError::Config { key, reason } => (key.to_string(), reason),
+            other => ("?".to_string(), other.to_string()),
+        };
+        self.detector.validate().map_err(infer_err)?;
+        self.depth.validate().map_err(infer_err)?;
+        self.tracker.validate().map_err(|e| match e {
+            crate::track::ConfigError::Key(k, m) => (format!("tracker.{k}"), m),
+            other => ("tracker".to_string(), other.to_string()),
+        })?;
+        self.postprocess.validate().map_err(keyed)?;
+        self.motion.validate().map_err(keyed)?;
         positive("output.rate_hz", self.output.rate_hz)?;
         if self.output.rate_hz > 100.0 {
             return err("output.rate_hz", "must be <= 100 Hz");
@@ -232,71 +256,6 @@ pub fn is_host_port(s: &str) -> bool {
     }
 }
 
-/// 1-based line of byte offset `pos`, and the dotted key written on that line (section path + key).
-/// When toml reports an unknown field, the key name is taken from the message instead.
-fn locate_span(text: &str, pos: usize, message: &str) -> (usize, String) {
-    let pos = pos.min(text.len());
-    let line_no = text[..pos].matches('\n').count() + 1;
-    let mut section = String::new();
-    let mut key = String::new();
-    for (i, line) in text.lines().enumerate() {
-        if i + 1 > line_no {
-            break;
-        }
-        let t = line.trim();
-        if let Some(h) = header_of(t) {
-            section = h;
-            key.clear();
-        } else if i + 1 == line_no
-            && let Some((k, _)) = t.split_once('=')
-        {
-            key = k.trim().trim_matches('"').to_string();
-        }
-    }
-    if let Some(rest) = message.split("unknown field `").nth(1)
-        && let Some(name) = rest.split('`').next()
-    {
-        key = name.to_string();
-    }
-    let dotted = match (section.is_empty(), key.is_empty()) {
-        (true, _) => key,
-        (false, true) => section,
-        (false, false) => format!("{section}.{key}"),
-    };
-    (line_no, if dotted.is_empty() { "?".into() } else { dotted })
-}
-
-/// `[a.b]` -> `a.b`.
-fn header_of(trimmed: &str) -> Option<String> {
-    let inner = trimmed.strip_prefix('[')?.split(']').next()?;
-    Some(inner.trim().to_string())
-}
-
-/// 1-based line where dotted `key` is set (`[section]` + `name =`), or of its section header when the
-/// key is absent (defaulted), or 0.
-pub fn find_key_line(text: &str, key: &str) -> usize {
-    let (section, name) = key.rsplit_once('.').unwrap_or(("", key));
-    let mut current = String::new();
-    let mut header_line = 0;
-    for (i, line) in text.lines().enumerate() {
-        let t = line.trim();
-        if let Some(h) = header_of(t) {
-            current = h;
-            if current == section {
-                header_line = i + 1;
-            }
-            continue;
-        }
-        if current == section
-            && let Some((k, _)) = t.split_once('=')
-            && k.trim().trim_matches('"') == name
-        {
-            return i + 1;
-        }
-    }
-    header_line
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -363,16 +322,11 @@ mod tests {
     }
 
     #[test]
-    fn tcp_connection_limits_checked_and_converted() {
+    fn tcp_connection_limits_checked() {
         for bad in [0, 65] {
             let e = parse(&format!("[output.modbus]\nmax_connections = {bad}\n")).err();
             assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.modbus.max_connections"), "{bad}: {e:?}");
         }
-        let c = parse("[output.modbus]\nmax_connections = 2\nidle_timeout_ms = 0\n").expect("valid");
-        let l = c.output.modbus.tcp_limits();
-        assert_eq!((l.max_connections, l.idle_timeout), (2, None), "0 ms = never close idle connections");
-        let l = Config::default().output.modbus.tcp_limits();
-        assert_eq!((l.max_connections, l.idle_timeout), (8, Some(std::time::Duration::from_secs(60))));
     }
 
     #[test]

@@ -4,13 +4,17 @@
 //! valid configuration. Unknown keys are errors: a typo must never be silently ignored on a box that
 //! runs unattended for months.
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
-pub use super::stages::{CameraConfig, DepthConfig, DetectorConfig, MotionConfig, PostprocessConfig, TrackerConfig};
+pub use super::stages::CameraConfig;
+pub use crate::infer::{DepthConfig, DetectorConfig};
+pub use crate::motion::MotionConfig;
+pub use crate::postprocess::PostprocessConfig;
+pub use crate::track::TrackerConfig;
 
-/// The whole configuration of `fme run`.
-#[derive(Debug, Clone, Default, Deserialize, PartialEq)]
+/// The whole configuration: `fme run`, `fme eval`, `fme track` and `fme tune` read this one type.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct Config {
     /// `[source]`: camera or recorded sequence.
@@ -38,7 +42,7 @@ pub struct Config {
 }
 
 /// Pixel format asked of a V4L2 camera.
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum CameraFormat {
     /// Motion JPEG (compressed; needed for 30 fps over USB 2.0 at 720p and above).
@@ -48,7 +52,7 @@ pub enum CameraFormat {
 }
 
 /// `[source]`.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct SourceConfig {
     /// A V4L2 device (`/dev/videoN`) or a MOTChallenge sequence directory (`img1/`, `seqinfo.ini`).
@@ -98,7 +102,7 @@ impl Default for SourceConfig {
 }
 
 /// `[output]`: update rate and staleness, plus `[output.modbus]` and `[output.serial]`.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct OutputConfig {
     /// Activity updates sent to the outputs, Hz (the heartbeat register increments at this rate).
@@ -118,7 +122,7 @@ impl Default for OutputConfig {
 }
 
 /// Modbus role.
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum ModbusMode {
     /// No Modbus.
@@ -134,7 +138,7 @@ pub enum ModbusMode {
 }
 
 /// Order of the two 16-bit words of a float32/uint32.
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum WordOrder {
     /// High word first (ABCD, "big endian"; default).
@@ -145,7 +149,7 @@ pub enum WordOrder {
 }
 
 /// Serial parity.
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum Parity {
     /// No parity.
@@ -157,7 +161,7 @@ pub enum Parity {
 }
 
 /// `[output.modbus]`.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct ModbusConfig {
     /// Role: `off`, `tcp-server`, `tcp-client`, `rtu-server`, `rtu-client`.
@@ -194,16 +198,6 @@ pub struct ModbusConfig {
     pub idle_timeout_ms: u64,
 }
 
-impl ModbusConfig {
-    /// The TCP server's connection limits.
-    pub fn tcp_limits(&self) -> crate::output::tcp_conns::TcpLimits {
-        crate::output::tcp_conns::TcpLimits {
-            max_connections: self.max_connections as usize,
-            idle_timeout: (self.idle_timeout_ms > 0).then(|| std::time::Duration::from_millis(self.idle_timeout_ms)),
-        }
-    }
-}
-
 impl Default for ModbusConfig {
     fn default() -> Self {
         Self {
@@ -227,7 +221,7 @@ impl Default for ModbusConfig {
 }
 
 /// `[output.serial]`: one ASCII line per update for simple data loggers.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct SerialLineConfig {
     /// Write the line output.
@@ -245,7 +239,7 @@ impl Default for SerialLineConfig {
 }
 
 /// `[console]`.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct ConsoleConfig {
     /// Serve the console.
@@ -267,7 +261,7 @@ impl Default for ConsoleConfig {
 }
 
 /// `[feeding]`: hysteresis on the smoothed activity with minimum on/off times.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct FeedingConfig {
     /// Recommend feeding when the smoothed activity rises to this or above, m/s.
@@ -287,7 +281,7 @@ impl Default for FeedingConfig {
 }
 
 /// `[service]`.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct ServiceConfig {
     /// Notify systemd (READY, WATCHDOG pings from the frame loop) when started by it.

@@ -1,19 +1,10 @@
-//! Where `fme eval` gets its tracked boxes from. The tracker and the detector model plug in by
-//! implementing [`BoxProvider`].
+//! Tracked boxes `fme eval` swaps in for the detector and tracker: ground truth or a track file.
 
 use super::EvalError;
 use crate::geometry::PixelBox;
 use crate::mot::io::{ReadOptions, read_file};
 use crate::sequence::Sequence;
 use std::path::{Path, PathBuf};
-
-/// A source of tracked boxes, frame by frame (frames are 1-based and requested in order).
-pub trait BoxProvider {
-    /// Short name for reports (`gt`, a file name, `tracker`).
-    fn name(&self) -> String;
-    /// Clears `out` and fills it with `(track id, box)` for `frame`.
-    fn frame_boxes(&mut self, frame: u32, out: &mut Vec<(u32, PixelBox)>) -> Result<(), EvalError>;
-}
 
 /// Boxes indexed by frame, loaded up front.
 #[derive(Debug, Clone)]
@@ -59,16 +50,18 @@ impl IndexedBoxes {
     }
 }
 
-impl BoxProvider for IndexedBoxes {
-    fn name(&self) -> String {
-        self.name.clone()
+impl IndexedBoxes {
+    /// Short name for reports (`gt` or the file).
+    pub fn name(&self) -> &str {
+        &self.name
     }
-    fn frame_boxes(&mut self, frame: u32, out: &mut Vec<(u32, PixelBox)>) -> Result<(), EvalError> {
+
+    /// Clears `out` and fills it with `(track id, box)` for `frame` (1-based).
+    pub fn frame_boxes(&self, frame: u32, out: &mut Vec<(u32, PixelBox)>) {
         out.clear();
         if let Some(b) = self.by_frame.get(frame as usize) {
             out.extend_from_slice(b);
         }
-        Ok(())
     }
 }
 
@@ -79,7 +72,7 @@ pub enum BoxesChoice {
     Gt,
     /// fme's tracker on the sequence's `det/det.txt`, or on noisy detections made from ground truth.
     Tracker,
-    /// The detector (`--det-model`) on the frames, then fme's tracker.
+    /// The pipeline's own detector and tracker.
     Model,
     /// A MOTChallenge track file.
     File(PathBuf),
@@ -96,19 +89,6 @@ impl std::str::FromStr for BoxesChoice {
         })
     }
 }
-
-impl BoxesChoice {
-    /// Builds the provider for `gt` and files; `tracker` and `model` are run by the evaluation
-    /// driver (they need its options), so here they are an error.
-    pub fn provider(&self, seq: &Sequence) -> Result<Box<dyn BoxProvider>, EvalError> {
-        match self {
-            Self::Gt => Ok(Box::new(IndexedBoxes::ground_truth(seq))),
-            Self::File(p) => Ok(Box::new(IndexedBoxes::from_mot_file(p, seq.len())?)),
-            Self::Tracker | Self::Model => Err(EvalError::NotAvailable("--boxes tracker|model")),
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -124,9 +104,8 @@ mod tests {
         std::fs::write(&spaces, "1 3 10 20 30 40 1 -1 -1 -1\n2\t3\t11 20 30 40\n2 -1 0 0 5 5 0.4\n").expect("write");
         let mut out = Vec::new();
         for path in [&comma, &spaces] {
-            let mut p: Box<dyn BoxProvider> =
-                Box::new(IndexedBoxes::from_mot_file(path, 2).unwrap_or_else(|e| panic!("{}: {e}", path.display())));
-            p.frame_boxes(2, &mut out).expect("in memory");
+            let p = IndexedBoxes::from_mot_file(path, 2).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            p.frame_boxes(2, &mut out);
             assert_eq!(out, [(3, PixelBox::new(11.0, 20.0, 30.0, 40.0))], "{}", path.display());
         }
         std::fs::write(&spaces, "1 3 10 20 30 40\n2 3 11 x 30 40\n").expect("write");

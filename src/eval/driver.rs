@@ -1,89 +1,52 @@
-//! The evaluation driver: run the estimator over a sequence and score it against ground truth.
+//! The evaluation driver: the daemon's own pipeline ([`FishPipeline`]) over a recording, with ground
+//! truth swapped in where asked, scored against ground truth.
+//!
+//! The frames come from the same recorded source `fme run` replays (`capture::RecordedSource`, as
+//! fast as possible, no loop) and go through [`FishPipeline`] with the one [`Config`]: the same
+//! reduced-rate schedule on frame time, depth sampling, fit, smoothing and `min_age`. The scoring
+//! taps read the pipeline's outputs after each frame, so what is scored is what the PLC receives.
 
 use std::collections::HashMap;
-
-use super::live::{self, DetectionScore};
-use super::metrics::{DepthAccuracy, bias, distance_correlation, quantile, rmse};
-use super::relative::{RelativeGtParams, relative_at, sample_relative};
-use super::{BoxProvider, BoxesChoice, EvalError};
-use crate::geometry::{Pixel, PixelBox};
-use crate::infer::{self, DepthNet, Detector, RelDepthMap, RgbFrame, SessionOptions};
-pub use crate::metric::DepthSample;
-use crate::metric::regressors::{Regressor, RegressorKind};
-use crate::metric::{
-    FitMethod, MapKind, ROBUST_INLIER, ReferencePair, ReferencePoints, References, RelativeMap, ScaleShift,
-    sample_fish, sample_median,
-};
-use crate::mot::MotMetrics;
-use crate::motion::{ActivityEstimator, MotionConfig, TrackObservation};
-use crate::postprocess::PostprocessConfig;
-use crate::sequence::{DepthMap, Sequence};
-use crate::track::TrackerConfig;
-use crate::units::Metres;
 use std::io::Write;
 use std::path::Path;
+
+use super::boxes::IndexedBoxes;
+use super::inputs::{BoxInput, DepthInput, GT_WINDOW, GroundTruth, to_metres};
+use super::live::{self, DetectionScore};
+use super::metrics::{DepthAccuracy, bias, distance_correlation, quantile, rmse};
+use super::relative::RelativeGtParams;
+use super::{BoxesChoice, EvalError};
+use crate::capture::{CaptureError, FrameSource, RecordedSource};
+use crate::config::Config;
+use crate::geometry::Pixel;
+use crate::metric::{DepthSample, FitMethod, MapKind, ReferencePoints, RelativeMap, sample_fish, sample_median};
+use crate::mot::{MotAccumulator, MotMetrics};
+use crate::pipeline::{ActivitySample, Calibration, FishPipeline, Pipeline, SeriesRow as PipelineRow};
+use crate::sequence::Sequence;
 
 /// The `--depth` choice.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum DepthChoice {
-    /// Ground-truth depth maps from `depth/` (the paper's GTDepth).
+    /// Ground-truth depth maps from `depth/` (the paper's GTDepth), on the depth network's schedule.
     Gt,
-    /// The depth network (`--depth-model`) on every frame, then the metric fit (eq. 1-2).
+    /// The pipeline's depth network and metric fit (eq. 1-2).
     Model,
     /// Ground-truth depth turned into noisy relative inverse depth, then the metric fit (eq. 1-2).
     RelativeGt,
 }
 
-/// The `--fit` choice (used with estimated depth).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum FitChoice {
-    /// The paper's eq. 2, `D = s*R + t`.
-    Linear,
-    /// `1/D = s*R + t`.
-    Inverse,
-    /// The inverse model fitted by exhaustive-pair RANSAC (survives fouled references).
-    Robust,
-    /// 2nd-order polynomial in R (Table 4).
-    Poly2,
-    /// Regression tree (Table 4).
-    Tree,
-    /// k-nearest neighbours (Table 4).
-    Knn,
-}
-
-/// Everything `fme eval` can vary.
+/// What `fme eval` swaps in and collects; everything else is the [`Config`].
 #[derive(Debug, Clone)]
 pub struct EvalOptions {
     /// Box source.
     pub boxes: BoxesChoice,
     /// Depth source.
     pub depth: DepthChoice,
-    /// Metric fit for estimated depth.
-    pub fit: FitChoice,
-    /// Post-processing of the main run (the raw run always has it off).
-    pub postprocess: PostprocessConfig,
-    /// Motion settings.
-    pub motion: MotionConfig,
     /// Synthetic relative depth settings for `relative-gt`.
     pub relative: RelativeGtParams,
     /// Number of reference objects to foul in `relative-gt` (their R is made to look 50% nearer).
     pub foul_refs: usize,
-    /// Radius of the median window used to sample depth maps (2 = 5x5).
-    pub window_radius: usize,
-    /// Inlier tolerance of the robust fit: max(absolute, relative * depth).
-    pub robust_inlier: (Metres, f64),
-    /// How fish depth is sampled.
-    pub depth_sample: DepthSample,
-    /// Detector for `--boxes model`.
-    pub detector: infer::DetectorConfig,
-    /// Depth network for `--depth model`.
-    pub depth_model: infer::DepthConfig,
-    /// ONNX Runtime intra-op threads.
-    pub threads: usize,
-    /// Tracker for `--boxes tracker|model`.
-    pub tracker: TrackerConfig,
     /// Seed of the synthetic detections of `--boxes tracker` (when the sequence has no det/det.txt).
     pub det_seed: u64,
     /// Collect one [`TrackRow`] per fish and frame into [`EvalReport::tracks`] (`--tracks`).
@@ -95,42 +58,36 @@ impl Default for EvalOptions {
         Self {
             boxes: BoxesChoice::Gt,
             depth: DepthChoice::Gt,
-            fit: FitChoice::Linear,
-            postprocess: PostprocessConfig::default(),
-            motion: MotionConfig::default(),
             relative: RelativeGtParams::default(),
             foul_refs: 0,
-            window_radius: 2,
-            robust_inlier: ROBUST_INLIER,
-            depth_sample: DepthSample::Centre,
-            detector: infer::DetectorConfig { class_agnostic: true, ..infer::DetectorConfig::default() },
-            depth_model: infer::DepthConfig::default(),
-            threads: 2,
-            tracker: TrackerConfig::default_preset(),
             det_seed: 1,
             track_rows: false,
         }
     }
 }
 
-/// One frame of the series behind the plots (`--series`).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+/// One frame of the scored series (`--series`): the pipeline's sample and the truth.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SeriesRow {
-    /// 1-based frame number.
-    pub frame: u32,
-    /// Timestamp, seconds.
-    pub t: f64,
+    /// The frame and the sample the pipeline computed on it (what `fme run --series` writes).
+    pub row: PipelineRow,
     /// Ground-truth swarm speed (mean |v| over visible fish) at the time the estimate refers to
     /// (`t - latency`, interpolated between frames), m/s.
     pub true_mps: Option<f64>,
-    /// The same for the run without post-processing.
-    pub true_raw_mps: Option<f64>,
-    /// Estimated swarm speed (eq. 5) with post-processing as configured, m/s.
-    pub est_mps: Option<f64>,
-    /// Estimated swarm speed with post-processing off, m/s.
-    pub est_raw_mps: Option<f64>,
-    /// Fish in the estimated mean.
-    pub n_fish: usize,
+    /// Ground-truth swarm speed at the frame itself, m/s (what a PLC reading the value now compares to).
+    pub true_now_mps: Option<f64>,
+}
+
+impl SeriesRow {
+    /// The estimate, when there is one.
+    pub fn est_mps(&self) -> Option<f64> {
+        let m = self.row.sample.mean.0;
+        m.is_finite().then_some(m)
+    }
+    /// Timestamp, s.
+    pub fn t(&self) -> f64 {
+        self.row.sample.timestamp.0
+    }
 }
 
 /// One tracked fish in one frame, as the estimator saw it (`--tracks`): what separates the speed
@@ -164,28 +121,28 @@ pub struct EvalReport {
     pub boxes: String,
     /// Depth source.
     pub depth: DepthChoice,
-    /// Metric fit (meaningful with estimated depth).
-    pub fit: Option<FitChoice>,
-    /// Post-processing on in the main run.
+    /// Metric fit (`depth.fit`; meaningful with estimated depth).
+    pub fit: Option<FitMethod>,
+    /// Post-processing (eq. 3 or eq. 4) on.
     pub postprocess: bool,
-    /// How fish depth was sampled.
+    /// How fish depth was sampled (`depth.sample`).
     pub depth_sample: DepthSample,
+    /// Detector and depth-network rates, Hz (0 = every frame).
+    pub rates_hz: [f64; 2],
     /// Speed span, seconds (0 = frame to frame).
     pub speed_span_s: f64,
     /// Frames with both a true and an estimated swarm speed (the scored frames).
     pub frames: usize,
-    /// RMSE of the estimated swarm speed, m/s.
+    /// RMSE of the estimated swarm speed against the truth at the time it refers to (`t - latency`), m/s.
     pub speed_rmse_mps: f64,
+    /// RMSE against the truth at the frame itself (what the PLC compares with when it reads now), m/s.
+    pub speed_rmse_now_mps: f64,
     /// Distance correlation of estimated and true swarm speed.
     pub speed_distcorr: f64,
     /// 2.5% and 97.5% quantiles of the per-frame error (estimated - true), m/s.
     pub error_ci95_mps: [f64; 2],
     /// Mean error (estimated - true), m/s.
     pub speed_bias_mps: f64,
-    /// RMSE with post-processing off, m/s.
-    pub speed_rmse_raw_mps: f64,
-    /// Distance correlation with post-processing off.
-    pub speed_distcorr_raw: f64,
     /// Mean true swarm speed over the scored frames, m/s.
     pub mean_true_mps: f64,
     /// Mean estimated swarm speed over the scored frames, m/s.
@@ -194,45 +151,45 @@ pub struct EvalReport {
     pub mean_fish: f64,
     /// Mean latency of the estimate (the speeds refer to `t - latency`), seconds.
     pub latency_s: f64,
-    /// Depth RMSE at fish box centres (estimated depth only), metres.
+    /// Pipeline CPU time per frame (process-wide, around `FishPipeline::process`), ms.
+    pub cpu_ms_per_frame: f64,
+    /// Depth RMSE at fish (estimated depth only, ground truth read the same way), metres.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_rmse_m: Option<f64>,
-    /// Fraction of fish centres with max(est/true, true/est) < 1.25.
+    /// Fraction of fish with max(est/true, true/est) < 1.25.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_delta_1_25: Option<f64>,
     /// Same with 1.25^2.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_delta_1_25_2: Option<f64>,
     /// With ground-truth boxes: depth RMSE against the camera z of each fish's body centre
-    /// (`gt/world.csv`), whatever `depth_sample` reads; a surface sample is nearer than the body
-    /// centre by about half the fish's thickness. Metres.
+    /// (`gt/world.csv`), whatever `depth.sample` reads. Metres.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_body_rmse_m: Option<f64>,
     /// Same pairs: fraction with max(est/true, true/est) < 1.25.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_body_delta_1_25: Option<f64>,
-    /// Fraction of the ground-truth boxes (with a `world.csv` row) that got a depth, i.e. that the
-    /// body-centre score covers; `visible` sampling gives hidden fish none.
+    /// Fraction of the ground-truth boxes (with a `world.csv` row) that got a depth.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_body_coverage: Option<f64>,
-    /// Mean residual of the per-frame metric fits at the references, metres.
+    /// Mean RMS residual of the metric fits at the references, metres.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fit_residual_m: Option<f64>,
-    /// Frames whose fit failed (the previous fit was kept).
-    pub fit_failures: usize,
+    /// Depth frames whose fit failed (the previous fit was kept).
+    pub fit_failures: u64,
     /// References visible in the image (used by the fits).
     pub references_visible: usize,
-    /// Total reference rejections by the robust fit over all frames.
+    /// Total reference rejections by the robust fit over all fits.
     pub references_rejected: u64,
-    /// Box corrections by eq. 3 in the main run.
+    /// Box corrections by eq. 3.
     pub boxes_corrected: u64,
-    /// Depth corrections by eq. 4 in the main run.
+    /// Depth corrections by eq. 4.
     pub depths_corrected: u64,
-    /// Tracking quality of `--boxes tracker|model` against gt/gt.txt (IoU 0.5); its fields appear at
+    /// Tracking quality of the pipeline's tracks against gt/gt.txt (IoU 0.5); its fields appear at
     /// the top level of the JSON (`idf1`, `mota`, `motp`, `id_switches`, ...).
     #[serde(flatten, skip_serializing_if = "Option::is_none")]
     pub mot: Option<MotSummary>,
-    /// Detection quality of `--boxes model` (IoU 0.5; fish under 50% visible are don't-care).
+    /// Detection quality of the pipeline's detector (IoU 0.5; fish under 50% visible are don't-care).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub detection: Option<DetectionScore>,
     /// Per-frame series (written by `--series`, not part of the JSON).
@@ -276,95 +233,73 @@ impl From<&MotMetrics> for MotSummary {
     }
 }
 
-/// A box source with its tracking and detection scores where computed here.
-type BoxSource = (Box<dyn BoxProvider>, Option<MotSummary>, Option<DetectionScore>);
+/// Process CPU time (user + system) so far, seconds; `None` where /proc is not readable.
+fn process_cpu_s() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which may hold spaces) start after the last ')'.
+    let rest = s.rsplit_once(')')?.1;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
 
-/// The box source of a run.
-fn box_source(seq: &Sequence, opts: &EvalOptions) -> Result<BoxSource, EvalError> {
-    match &opts.boxes {
+/// The box input of a run.
+fn box_input(seq: &Sequence, opts: &EvalOptions) -> Result<BoxInput, EvalError> {
+    Ok(match &opts.boxes {
+        BoxesChoice::Gt => BoxInput::Tracks(IndexedBoxes::ground_truth(seq)),
+        BoxesChoice::File(p) => BoxInput::Tracks(IndexedBoxes::from_mot_file(p, seq.len())?),
+        BoxesChoice::Model => BoxInput::Pipeline,
         BoxesChoice::Tracker => {
             let det_file = seq.dir.join("det").join("det.txt");
-            let dets = if det_file.is_file() {
+            BoxInput::Detections(if det_file.is_file() {
                 crate::mot::io::read_detections(&det_file, seq.len())?
             } else {
                 live::synthetic_detections(seq, opts.det_seed)
-            };
-            let (b, m) = live::track(seq, opts.tracker, &dets, "tracker");
-            Ok((Box::new(b), Some((&m).into()), None))
+            })
         }
-        BoxesChoice::Model => {
-            let model_err = |e: infer::InferError| EvalError::Model(format!("--det-model: {e}"));
-            infer::runtime::environment().map_err(model_err)?;
-            let so = SessionOptions { intra_threads: opts.threads, ..SessionOptions::default() };
-            let mut detector = Detector::open(&opts.detector, so).map_err(model_err)?;
-            let (dets, score) = live::model_detections(seq, &mut detector)?;
-            let (b, m) = live::track(seq, opts.tracker, &dets, "model");
-            Ok((Box::new(b), Some((&m).into()), Some(score)))
-        }
-        other => Ok((other.provider(seq)?, None, None)),
-    }
-}
-
-/// Runs the depth network on frame `frame` of `seq`.
-fn model_depth<'a>(seq: &Sequence, net: &'a mut DepthNet, frame: u32) -> Result<&'a RelDepthMap, EvalError> {
-    let img = live::read_frame_rgb(seq, frame)?;
-    net.estimate(&RgbFrame::from(&img), seq.timestamp(frame))
-        .map_err(|e| EvalError::Input { path: seq.frame_path(frame), msg: e.to_string() })
-}
-
-enum Fitted {
-    Ss(ScaleShift),
-    Reg(Box<Regressor>),
-}
-
-impl Fitted {
-    fn depth(&self, r: f64) -> Option<Metres> {
-        match self {
-            Self::Ss(f) => f.depth(r),
-            Self::Reg(g) => g.depth(r),
-        }
-    }
-}
-
-fn fit_frame(opts: &EvalOptions, refs: &References) -> Result<Fitted, crate::metric::FitError> {
-    Ok(match opts.fit {
-        FitChoice::Linear => Fitted::Ss(FitMethod::Linear.fit(refs, opts.robust_inlier)?),
-        FitChoice::Inverse => Fitted::Ss(FitMethod::Inverse.fit(refs, opts.robust_inlier)?),
-        FitChoice::Robust => Fitted::Ss(FitMethod::Robust.fit(refs, opts.robust_inlier)?),
-        FitChoice::Poly2 => Fitted::Reg(Box::new(Regressor::fit(RegressorKind::Poly2, refs)?)),
-        FitChoice::Tree => Fitted::Reg(Box::new(Regressor::fit(RegressorKind::Tree, refs)?)),
-        FitChoice::Knn => Fitted::Reg(Box::new(Regressor::fit(RegressorKind::Knn, refs)?)),
     })
 }
 
-fn to_metres(depth: &DepthMap, out: &mut Vec<f32>) {
-    out.clear();
-    out.extend(depth.mm.iter().map(|&mm| if mm == 0 { f32::NAN } else { f32::from(mm) / 1000.0 }));
-}
-
-/// Runs the evaluation. Reads frames' depth maps one at a time; memory is O(frames + pixels).
-pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalError> {
+/// Runs the evaluation: the pipeline over every frame of `seq` with `cfg`, scored.
+pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<EvalReport, EvalError> {
     if !seq.has_depth {
         return Err(EvalError::Input {
             path: seq.dir.join("depth"),
             msg: "missing: the ground-truth depth maps are needed to score depth and speed".into(),
         });
     }
-    let mut depth_net = match opts.depth {
-        DepthChoice::Model => {
-            let model_err = |e: infer::InferError| EvalError::Model(format!("--depth-model: {e}"));
-            infer::runtime::environment().map_err(model_err)?;
-            let so = SessionOptions { intra_threads: opts.threads, ..SessionOptions::default() };
-            Some(DepthNet::open(&opts.depth_model, so).map_err(model_err)?)
-        }
-        _ => None,
+    let mut cfg = cfg.clone();
+    cfg.source.path = seq.dir.clone();
+    cfg.source.realtime = false;
+    cfg.source.looping = false;
+    let calibration = Calibration::for_config(&cfg).map_err(EvalError::Model)?;
+    let boxes_name = match &opts.boxes {
+        BoxesChoice::Gt => "gt".to_string(),
+        BoxesChoice::Tracker => "tracker".to_string(),
+        BoxesChoice::Model => "model".to_string(),
+        BoxesChoice::File(p) => p.display().to_string(),
     };
-    let (mut provider, mot, detection) = box_source(seq, opts)?;
+    let depth_input = match opts.depth {
+        DepthChoice::Gt => DepthInput::Metric,
+        DepthChoice::Model => DepthInput::Pipeline,
+        DepthChoice::RelativeGt => DepthInput::Relative(opts.relative),
+    };
     let estimated = opts.depth != DepthChoice::Gt;
-    let (w, h) = (seq.meta.width as usize, seq.meta.height as usize);
-    // Reference points: projected once (the camera is fixed); hidden ones are left out.
-    let faces = seq.meta.reference_objects.iter().map(|r| r.front_face_center());
-    let ref_px = ReferencePoints::project(&seq.camera, faces, seq.meta.width, seq.meta.height);
+    // Reference pixels as the pipeline projects them; the first `foul_refs` read 50% nearer.
+    let refs = ReferencePoints::project(
+        &seq.camera,
+        seq.meta.reference_objects.iter().map(|r| r.front_face_center()),
+        seq.meta.width,
+        seq.meta.height,
+    );
+    let fouled: Vec<Pixel> = refs.iter().take(opts.foul_refs).map(|(px, _)| px).collect();
+    let gt_seq = Sequence::open(&seq.dir)?;
+    let substitute = GroundTruth::new(gt_seq, box_input(seq, opts)?, depth_input, fouled);
+    let mut pipeline =
+        FishPipeline::with_substitute(&cfg, calibration, Box::new(substitute)).map_err(EvalError::Model)?;
+    let mut source = RecordedSource::open(&seq.dir, false, false)
+        .map_err(|e| EvalError::Input { path: seq.dir.clone(), msg: e.to_string() })?;
+
     // True swarm speed per frame: mean |v| of the fish visible in it.
     let mut true_sum = vec![(0.0f64, 0usize); seq.len() as usize + 1];
     for r in &seq.world {
@@ -376,121 +311,95 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
             s.1 += 1;
         }
     }
-    let mut est = ActivityEstimator::new(seq.camera, opts.motion, opts.postprocess);
-    let mut est_raw = ActivityEstimator::new(seq.camera, opts.motion, PostprocessConfig::off());
-    let mut boxes: Vec<(u32, PixelBox)> = Vec::new();
-    let mut obs: Vec<TrackObservation> = Vec::new();
-    let mut gt_map = Vec::new();
-    let mut depth_acc = DepthAccuracy::default();
-    let (mut body_acc, mut body_boxes) = (DepthAccuracy::default(), 0usize);
     // Camera z of each fish's body centre by (frame, id): ground-truth boxes carry world.csv's ids.
     let body_z: HashMap<(u32, u32), f64> = if estimated && opts.boxes == BoxesChoice::Gt {
         seq.world.iter().map(|r| ((r.frame, r.id), seq.camera.pose.to_camera(&r.position).depth().0)).collect()
     } else {
         HashMap::new()
     };
-    let mut last_fit: Option<Fitted> = None;
-    let (mut fit_failures, mut rejected, mut residual_sum, mut residual_n) = (0usize, 0u64, 0.0, 0usize);
+    let gt_boxes = live::gt_by_frame(seq);
+    let score_tracks = opts.boxes != BoxesChoice::Gt && !matches!(opts.boxes, BoxesChoice::File(_));
+    let mut mot = MotAccumulator::new();
+    let mut detection = DetectionScore::default();
+    let mut depth_acc = DepthAccuracy::default();
+    let (mut body_acc, mut body_boxes) = (DepthAccuracy::default(), 0usize);
     let (mut boxes_corrected, mut depths_corrected) = (0u64, 0u64);
     let mut series = Vec::with_capacity(seq.len() as usize);
-    let mut latencies = Vec::with_capacity(seq.len() as usize);
     let mut tracks = Vec::new();
-    let radius = opts.window_radius;
-    for frame in 1..=seq.len() {
-        let t = seq.timestamp(frame);
-        provider.frame_boxes(frame, &mut boxes)?;
-        let dm = seq.read_depth(frame)?;
-        if (dm.width as usize, dm.height as usize) != (w, h) {
-            return Err(EvalError::Input {
-                path: seq.depth_path(frame),
-                msg: format!("depth map is {}x{}, the sequence is {w}x{h}", dm.width, dm.height),
-            });
+    let (mut gt_mm, mut gt_m) = (None, Vec::new());
+    let (mut g, mut h, mut frame_gt) = (Vec::new(), Vec::new(), Vec::new());
+    let mut cpu_s = 0.0;
+    let mut buf = Vec::new();
+    loop {
+        let frame_data = match source.next_frame(std::mem::take(&mut buf)) {
+            Ok(f) => f,
+            Err(CaptureError::End) => break,
+            Err(e) => return Err(EvalError::Input { path: seq.dir.clone(), msg: e.to_string() }),
+        };
+        let frame = u32::try_from(frame_data.seq + 1).unwrap_or(u32::MAX);
+        let cpu0 = process_cpu_s();
+        let sample = pipeline
+            .process(&frame_data)
+            .map_err(|e| EvalError::Input { path: seq.frame_path(frame), msg: e.to_string() })?;
+        if let (Some(a), Some(b)) = (cpu0, process_cpu_s()) {
+            cpu_s += b - a;
         }
-        to_metres(&dm, &mut gt_map);
-        let gt = RelativeMap { data: &gt_map, width: w, height: h };
-        let map: Option<&RelDepthMap> = match depth_net.as_mut() {
-            Some(net) => Some(model_depth(seq, net, frame)?),
-            None => None,
-        };
-        // Relative inverse depth at a pixel: the network's map, or ground truth made relative.
-        // (The network's map is sampled with its own window, `depth.sample_radius` map pixels.)
-        let rel = |px: Pixel| -> Option<f64> {
-            match map {
-                Some(m) => m.sample(px).map(f64::from),
-                None => sample_relative(&opts.relative, &dm, frame, px, radius),
-            }
-        };
-        if estimated {
-            let mut refs = References::new();
-            for (i, (px, depth)) in ref_px.iter().enumerate() {
-                if let Some(mut r) = rel(px) {
-                    if i < opts.foul_refs {
-                        r *= 1.5;
-                    }
-                    let _ = refs.push(ReferencePair { relative: r, depth });
-                }
-            }
-            match fit_frame(opts, &refs) {
-                Ok(f) => {
-                    if let Fitted::Ss(s) = &f {
-                        residual_sum += s.residual_rms.0;
-                        residual_n += 1;
-                        rejected += u64::from(s.rejected.count_ones());
-                    }
-                    last_fit = Some(f);
-                }
-                Err(_) => fit_failures += 1,
-            }
+        buf = frame_data.data;
+        let Some(sample) = sample else { continue };
+        let t = sample.timestamp;
+        let est = *pipeline.estimate();
+        boxes_corrected += u64::from(est.boxes_corrected);
+        depths_corrected += u64::from(est.depths_corrected);
+        let fg = gt_boxes.get(frame as usize - 1).map_or(&[][..], Vec::as_slice);
+        if score_tracks {
+            g.clear();
+            g.extend(fg.iter().map(|&(id, b, _)| (i64::from(id), b)));
+            h.clear();
+            h.extend(pipeline.observations().iter().map(|o| (i64::from(o.id), o.bbox)));
+            mot.update(&g, &h);
         }
-        obs.clear();
-        obs.extend(boxes.iter().map(|&(id, bbox)| TrackObservation { id, bbox, depth: None }));
-        // The other fish's boxes (what may cover `o` for `DepthSample::Visible`).
-        let others = |id: u32| obs.iter().filter(move |x| x.id != id).map(|x| &x.bbox);
-        // Ground truth in metres in `bbox`, or at its centre with the paper's window.
-        let gt_at = |o: &TrackObservation, bbox: &PixelBox| {
-            let c = bbox.center();
-            sample_fish(
-                opts.depth_sample,
-                MapKind::Depth,
-                bbox,
-                others(o.id),
-                || sample_median(&gt, c, radius, |_| true),
-                |p| gt.at(p),
-            )
-        };
-        let depth_at = |o: &TrackObservation, px: Pixel| -> Option<Metres> {
-            let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
-            if !estimated {
-                return gt_at(o, &b).map(Metres);
-            }
-            // Relative inverse depth of the network or of ground truth at one grid point.
-            let rel_at = |p| match map {
-                Some(m) => m.sample_with_radius(p, 0).map(f64::from),
-                None => relative_at(&opts.relative, &dm, frame, p),
-            };
-            let r = sample_fish(opts.depth_sample, MapKind::InverseDepth, &b, others(o.id), || rel(px), rel_at)?;
-            last_fit.as_ref()?.depth(r)
-        };
+        if opts.boxes == BoxesChoice::Model && pipeline.ran().detect {
+            frame_gt.clear();
+            frame_gt.extend(fg.iter().map(|&(_, b, v)| (b, v)));
+            detection.add_frame(pipeline.detections(), &frame_gt);
+        }
         if estimated {
-            for o in &obs {
-                let c = o.bbox.center();
+            let dm = seq.read_depth(frame)?;
+            to_metres(&dm, &mut gt_m);
+            gt_mm = Some((dm.width as usize, dm.height as usize));
+        }
+        let views: Vec<_> = pipeline.tracks().filter(|v| v.last_seen == t).collect();
+        if let (true, Some((w, hgt))) = (estimated, gt_mm) {
+            let gt = RelativeMap { data: &gt_m, width: w, height: hgt };
+            for v in &views {
+                let Some(e) = v.depth_measured else {
+                    if body_z.contains_key(&(frame, v.id)) {
+                        body_boxes += 1;
+                    }
+                    continue;
+                };
                 // Ground truth read the same way as the estimate (the same pixels).
-                let g = gt_at(o, &o.bbox);
-                let e = depth_at(o, c);
-                if let (Some(e), Some(g)) = (e, g) {
+                let others = views.iter().filter(|x| x.id != v.id).map(|x| &x.bbox);
+                let c = v.bbox.center();
+                let truth = sample_fish(
+                    cfg.depth.sample,
+                    MapKind::Depth,
+                    &v.bbox,
+                    others,
+                    || sample_median(&gt, c, GT_WINDOW, |_| true),
+                    |p| gt.at(p),
+                );
+                if let Some(g) = truth {
                     depth_acc.add(e.0, g);
                 }
-                if let Some(&z) = body_z.get(&(frame, o.id)) {
+                if let Some(&z) = body_z.get(&(frame, v.id)) {
                     body_boxes += 1;
-                    if let Some(e) = e {
-                        body_acc.add(e.0, z);
-                    }
+                    body_acc.add(e.0, z);
                 }
             }
         }
-        let s = est.update_with(t, &obs, &depth_at);
         if opts.track_rows {
-            tracks.extend(est.tracks().filter(|v| v.last_seen == t).map(|v| TrackRow {
+            tracks.extend(views.iter().map(|v| TrackRow {
                 frame,
                 t: t.0,
                 id: v.id,
@@ -501,21 +410,13 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
                 speed_mps: v.speed.map(|s| s.0),
             }));
         }
-        let s_raw = est_raw.update_with(t, &obs, &depth_at);
-        boxes_corrected += u64::from(s.boxes_corrected);
-        depths_corrected += u64::from(s.depths_corrected);
         series.push(SeriesRow {
-            frame,
-            t: t.0,
+            row: PipelineRow { frame: u64::from(frame), sample },
             true_mps: None,
-            true_raw_mps: None,
-            est_mps: s.mean.map(|m| m.0),
-            est_raw_mps: s_raw.mean.map(|m| m.0),
-            n_fish: s.n_fish,
+            true_now_mps: None,
         });
-        latencies.push((s.latency.0, s_raw.latency.0));
     }
-    // Truth at the time each estimate refers to (`ActivitySample::latency`), interpolated between frames.
+    // Truth at the time each estimate refers to (`SwarmEstimate::latency`), interpolated between frames.
     let truth_frame: Vec<Option<f64>> = true_sum.iter().map(|&(ts, tn)| (tn > 0).then(|| ts / tn as f64)).collect();
     let fps = seq.meta.fps;
     let truth_at = |tq: f64| -> Option<f64> {
@@ -534,62 +435,65 @@ pub fn evaluate(seq: &Sequence, opts: &EvalOptions) -> Result<EvalReport, EvalEr
             _ => None,
         }
     };
-    for (r, &(lat, lat_raw)) in series.iter_mut().zip(&latencies) {
-        r.true_mps = if r.est_mps.is_some() { truth_at(r.t - lat) } else { truth_frame[r.frame as usize] };
-        r.true_raw_mps = if r.est_raw_mps.is_some() { truth_at(r.t - lat_raw) } else { truth_frame[r.frame as usize] };
+    for r in &mut series {
+        let now = truth_frame.get(r.row.frame as usize).copied().flatten();
+        r.true_now_mps = now;
+        r.true_mps = if r.est_mps().is_some() { truth_at(r.t() - r.row.sample.latency.0) } else { now };
     }
-    let scored: Vec<&SeriesRow> = series.iter().filter(|r| r.true_mps.is_some() && r.est_mps.is_some()).collect();
+    let scored: Vec<&SeriesRow> = series.iter().filter(|r| r.true_mps.is_some() && r.est_mps().is_some()).collect();
     if scored.len() < 2 {
         return Err(EvalError::NothingToScore(format!(
-            "{}: only {} frame(s) have both a true and an estimated swarm speed (boxes from {}, {} boxes in total)",
+            "{}: only {} frame(s) have both a true and an estimated swarm speed (boxes from {boxes_name}, {} boxes in total)",
             seq.dir.display(),
             scored.len(),
-            provider.name(),
             seq.gt.len()
         )));
     }
     let truth: Vec<f64> = scored.iter().filter_map(|r| r.true_mps).collect();
-    let est_v: Vec<f64> = scored.iter().filter_map(|r| r.est_mps).collect();
-    let raw_pairs: Vec<(f64, f64)> =
-        series.iter().filter_map(|r| Some((r.est_raw_mps?, r.true_raw_mps?))).collect::<Vec<_>>();
-    let (raw_e, raw_t): (Vec<f64>, Vec<f64>) = raw_pairs.into_iter().unzip();
+    let est_v: Vec<f64> = scored.iter().filter_map(|r| r.est_mps()).collect();
+    let (now_e, now_t): (Vec<f64>, Vec<f64>) =
+        series.iter().filter_map(|r| Some((r.est_mps()?, r.true_now_mps?))).unzip();
     let errors: Vec<f64> = est_v.iter().zip(&truth).map(|(e, t)| e - t).collect();
     let n = scored.len() as f64;
+    let with_est: Vec<&ActivitySample> =
+        series.iter().filter(|r| r.est_mps().is_some()).map(|r| &r.row.sample).collect();
+    let fits = pipeline.fit_stats();
+    let mot_summary = score_tracks.then(|| MotSummary::from(&mot.metrics()));
     Ok(EvalReport {
         sequence: seq.dir.display().to_string(),
-        boxes: provider.name(),
+        boxes: boxes_name,
         depth: opts.depth,
-        fit: estimated.then_some(opts.fit),
-        postprocess: opts.postprocess.box_fluctuation || opts.postprocess.depth_jump,
-        depth_sample: opts.depth_sample,
-        speed_span_s: opts.motion.speed_span.0,
+        fit: estimated.then_some(cfg.depth.fit),
+        postprocess: cfg.postprocess.box_fluctuation || cfg.postprocess.depth_jump,
+        depth_sample: cfg.depth.sample,
+        rates_hz: [cfg.detector.rate_hz, cfg.depth.rate_hz],
+        speed_span_s: cfg.motion.speed_span_s.0,
         frames: scored.len(),
         speed_rmse_mps: rmse(&est_v, &truth).unwrap_or(f64::NAN),
+        speed_rmse_now_mps: rmse(&now_e, &now_t).unwrap_or(f64::NAN),
         speed_distcorr: distance_correlation(&est_v, &truth).unwrap_or(0.0),
         error_ci95_mps: [quantile(&errors, 0.025).unwrap_or(0.0), quantile(&errors, 0.975).unwrap_or(0.0)],
         speed_bias_mps: bias(&est_v, &truth).unwrap_or(0.0),
-        speed_rmse_raw_mps: rmse(&raw_e, &raw_t).unwrap_or(f64::NAN),
-        speed_distcorr_raw: distance_correlation(&raw_e, &raw_t).unwrap_or(0.0),
         mean_true_mps: truth.iter().sum::<f64>() / n,
         mean_est_mps: est_v.iter().sum::<f64>() / n,
-        mean_fish: scored.iter().map(|r| r.n_fish as f64).sum::<f64>() / n,
+        mean_fish: scored.iter().map(|r| f64::from(r.row.sample.fish)).sum::<f64>() / n,
         // Over the frames with an estimate (a frame without one has no latency).
-        latency_s: series.iter().zip(&latencies).filter(|(r, _)| r.est_mps.is_some()).map(|(_, l)| l.0).sum::<f64>()
-            / series.iter().filter(|r| r.est_mps.is_some()).count().max(1) as f64,
+        latency_s: with_est.iter().map(|s| s.latency.0).sum::<f64>() / with_est.len().max(1) as f64,
+        cpu_ms_per_frame: 1000.0 * cpu_s / series.len().max(1) as f64,
         depth_rmse_m: depth_acc.rmse(),
         depth_delta_1_25: depth_acc.delta_1_25(),
         depth_delta_1_25_2: depth_acc.delta_1_25_2(),
         depth_body_rmse_m: body_acc.rmse(),
         depth_body_delta_1_25: body_acc.delta_1_25(),
         depth_body_coverage: (body_boxes > 0).then(|| body_acc.count() as f64 / body_boxes as f64),
-        fit_residual_m: (residual_n > 0).then(|| residual_sum / residual_n as f64),
-        fit_failures,
-        references_visible: ref_px.len(),
-        references_rejected: rejected,
+        fit_residual_m: (fits.residuals > 0).then(|| fits.residual_sum_m / fits.residuals as f64),
+        fit_failures: fits.failures,
+        references_visible: pipeline.references_in_view(),
+        references_rejected: fits.rejected,
         boxes_corrected,
         depths_corrected,
-        mot,
-        detection,
+        mot: mot_summary,
+        detection: (opts.boxes == BoxesChoice::Model).then_some(detection),
         series,
         tracks,
     })
@@ -616,12 +520,15 @@ fn csv_opt(v: Option<f64>) -> String {
     v.map_or(String::new(), |x| format!("{x}"))
 }
 
-/// Writes the per-frame series as CSV with header `frame,t,true_mps,est_mps,n_fish` (empty field
-/// where a value is missing).
+/// Writes the series the pipeline computed, in the columns of `fme run --series` (so the two files
+/// compare column by column) followed by the truth: `true_mps` (at `t - latency`) and `true_now_mps`.
 pub fn write_series(path: &Path, series: &[SeriesRow]) -> Result<(), EvalError> {
-    write_csv(path, "frame,t,true_mps,est_mps,n_fish", series, |out, r| {
-        writeln!(out, "{},{},{},{},{}", r.frame, r.t, csv_opt(r.true_mps), csv_opt(r.est_mps), r.n_fish)
-    })
+    let err = |msg: String| EvalError::Output { path: path.to_path_buf(), msg };
+    let mut w = crate::pipeline::SeriesWriter::create(path, ",true_mps,true_now_mps").map_err(err)?;
+    for r in series {
+        w.write_with(&r.row, format_args!(",{},{}", csv_opt(r.true_mps), csv_opt(r.true_now_mps))).map_err(err)?;
+    }
+    w.finish().map_err(err)
 }
 
 /// Writes the per-fish rows as CSV with header `frame,t,id,u,v,w,h,depth_raw_m,depth_m,speed_mps`

@@ -1,17 +1,11 @@
-//! Boxes computed by `fme eval` itself: fme's tracker on detections (the sequence's `det/det.txt`,
-//! or ground truth turned into realistic noisy detections), and the ONNX detector on the frames. Each
-//! run is also scored as multi-object tracking (MOTA, IDF1, ...) and, for the detector, as
-//! detection (precision and recall at IoU 0.5).
+//! Detection scoring (precision and recall at IoU 0.5) and the inputs `fme eval` derives from
+//! ground truth: the clipped ground-truth boxes of each frame, and realistic noisy detections for
+//! `--boxes tracker` on sequences without a `det/det.txt`.
 
-use super::EvalError;
-use super::boxes::IndexedBoxes;
 use crate::geometry::PixelBox;
-use crate::infer::{Detector, RgbFrame};
-use crate::metric::ReferenceFootprints;
-use crate::mot::{MotAccumulator, MotMetrics};
 use crate::sequence::Sequence;
+use crate::track::Detection;
 use crate::track::tune::{DetNoise, GtObs, TuneSequence, synth_detections};
-use crate::track::{Detection, Tracker, TrackerConfig};
 
 /// Ground-truth fish at least this visible must be detected; less visible ones are "don't care"
 /// (a detection on them is neither a true nor a false positive). Same rule as `training/evaluate.py`.
@@ -66,7 +60,7 @@ impl DetectionScore {
 /// Ground-truth boxes of every frame with their visibility (index 0 = frame 1), clipped to the
 /// image (gt.txt boxes are amodal and may reach outside it; a detector can only see the inside).
 /// Fish entirely outside the image are left out.
-fn gt_by_frame(seq: &Sequence) -> Vec<Vec<(u32, PixelBox, f64)>> {
+pub fn gt_by_frame(seq: &Sequence) -> Vec<Vec<(u32, PixelBox, f64)>> {
     let (w, h) = (f64::from(seq.meta.width), f64::from(seq.meta.height));
     let mut out = vec![Vec::new(); seq.len() as usize];
     for g in &seq.gt {
@@ -99,65 +93,6 @@ pub fn synthetic_detections(seq: &Sequence, seed: u64) -> Vec<Vec<Detection>> {
             .collect(),
     };
     synth_detections(&ts, &DetNoise::default(), seed)
-}
-
-/// Reads frame `frame` (1-based) of `seq` as RGB.
-pub(crate) fn read_frame_rgb(seq: &Sequence, frame: u32) -> Result<image::RgbImage, EvalError> {
-    let path = seq.frame_path(frame);
-    match image::open(&path) {
-        Ok(img) => Ok(img.to_rgb8()),
-        Err(e) => Err(EvalError::Input { path, msg: format!("cannot read frame: {e}") }),
-    }
-}
-
-/// Runs the detector on every frame image; returns the detections per frame and their score.
-/// Detections on the reference cubes are dropped first, as `fme run` does (`detector.ignore_references`).
-pub fn model_detections(
-    seq: &Sequence,
-    detector: &mut Detector,
-) -> Result<(Vec<Vec<Detection>>, DetectionScore), EvalError> {
-    let gt = gt_by_frame(seq);
-    let cubes = seq.meta.reference_objects.iter().map(|r| (r.center(), r.size()));
-    let footprints = ReferenceFootprints::project(&seq.camera, cubes);
-    let mut score = DetectionScore::default();
-    let mut out = Vec::with_capacity(seq.len() as usize);
-    let mut frame_gt = Vec::new();
-    for frame in 1..=seq.len() {
-        let img = read_frame_rgb(seq, frame)?;
-        let d = detector
-            .detect(&RgbFrame::from(&img), seq.timestamp(frame))
-            .map_err(|e| EvalError::Input { path: seq.frame_path(frame), msg: e.to_string() })?;
-        let dets: Vec<Detection> =
-            d.items.iter().filter(|x| !footprints.covers(&x.bbox)).map(|x| Detection::new(x.bbox, x.score)).collect();
-        frame_gt.clear();
-        frame_gt.extend(gt[frame as usize - 1].iter().map(|&(_, b, v)| (b, v)));
-        score.add_frame(&dets, &frame_gt);
-        out.push(dets);
-    }
-    Ok((out, score))
-}
-
-/// Runs the tracker over per-frame detections (index 0 = frame 1) on the sequence's timestamps;
-/// returns the confirmed tracks as boxes for the estimator and the MOT metrics against `gt/gt.txt`.
-pub fn track(seq: &Sequence, cfg: TrackerConfig, dets: &[Vec<Detection>], name: &str) -> (IndexedBoxes, MotMetrics) {
-    let gt = gt_by_frame(seq);
-    let mut tracker = Tracker::new(cfg);
-    let mut acc = MotAccumulator::new();
-    let mut by_frame = vec![Vec::new(); seq.len() as usize + 1];
-    let (mut g, mut h) = (Vec::new(), Vec::new());
-    for frame in 1..=seq.len() {
-        let empty = Vec::new();
-        let d = dets.get(frame as usize - 1).unwrap_or(&empty);
-        h.clear();
-        if let Ok(out) = tracker.update(seq.timestamp(frame), d) {
-            h.extend(out.iter().map(|o| (i64::from(o.id), o.bbox)));
-        }
-        g.clear();
-        g.extend(gt[frame as usize - 1].iter().map(|&(id, b, _)| (i64::from(id), b)));
-        acc.update(&g, &h);
-        by_frame[frame as usize] = h.iter().map(|&(id, b)| (id as u32, b)).collect();
-    }
-    (IndexedBoxes::new(name.to_string(), by_frame), acc.metrics())
 }
 
 #[cfg(test)]

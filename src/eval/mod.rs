@@ -2,21 +2,20 @@
 //! the error interval, depth accuracy at fish centres, plots and per-frame series, and the driver
 //! behind `fme eval`.
 //!
-//! The driver runs the same [`crate::motion::ActivityEstimator`] the daemon runs, frame by frame,
-//! twice: with the configured post-processing and with it off (`speed_rmse_raw_mps`), so every
-//! report shows what eq. 3-4 buy.
+//! The driver runs the daemon's own [`crate::pipeline::FishPipeline`] with the one config, ground
+//! truth swapped in where asked ([`inputs`]), so what is scored is what the PLC receives.
 
 mod boxes;
 mod driver;
+pub mod inputs;
 pub mod live;
 pub mod metrics;
 pub mod plot;
 pub mod relative;
 
-pub use boxes::{BoxProvider, BoxesChoice, IndexedBoxes};
+pub use boxes::{BoxesChoice, IndexedBoxes};
 pub use driver::{
-    DepthChoice, DepthSample, EvalOptions, EvalReport, FitChoice, MotSummary, SeriesRow, TrackRow, evaluate,
-    write_series, write_tracks,
+    DepthChoice, EvalOptions, EvalReport, MotSummary, SeriesRow, TrackRow, evaluate, write_series, write_tracks,
 };
 pub use metrics::{DepthAccuracy, distance_correlation, quantile, rmse};
 pub use relative::RelativeGtParams;
@@ -43,9 +42,6 @@ pub enum EvalError {
     /// A model or ONNX Runtime problem (the message names the file).
     #[error("{0}")]
     Model(String),
-    /// A box source that only the evaluation driver can build (it needs the driver's options).
-    #[error("{0} is built by eval::evaluate, not by BoxesChoice::provider")]
-    NotAvailable(&'static str),
     /// Writing an output (series, plot) failed.
     #[error("{path}: {msg}")]
     Output {

@@ -17,17 +17,17 @@ pub fn plot_series(path: &Path, report: &EvalReport) -> Result<(), EvalError> {
     });
     let err = |e: String| EvalError::Output { path: path.to_path_buf(), msg: e };
     let s = &report.series;
-    let t_max = s.iter().map(|r| r.t).fold(0.0, f64::max).max(1e-3);
+    let t_max = s.iter().map(super::SeriesRow::t).fold(0.0, f64::max).max(1e-3);
     let v_max =
-        s.iter().flat_map(|r| [r.true_mps, r.est_mps, r.est_raw_mps]).flatten().fold(0.0, f64::max).clamp(0.1, 5.0)
+        s.iter().flat_map(|r| [r.true_mps, r.est_mps(), r.true_now_mps]).flatten().fold(0.0, f64::max).clamp(0.1, 5.0)
             * 1.1;
     let root = BitMapBackend::new(path, (1200, 560)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
     let title = format!(
-        "{}  RMSE {:.3} m/s (raw {:.3})  DistCorr {:.3}",
+        "{}  RMSE {:.3} m/s (against the truth now {:.3})  DistCorr {:.3}",
         Path::new(&report.sequence).file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned()),
         report.speed_rmse_mps,
-        report.speed_rmse_raw_mps,
+        report.speed_rmse_now_mps,
         report.speed_distcorr
     );
     let mut chart = ChartBuilder::on(&root)
@@ -45,21 +45,21 @@ pub fn plot_series(path: &Path, report: &EvalReport) -> Result<(), EvalError> {
         .draw()
         .map_err(|e| err(e.to_string()))?;
     let line = |f: fn(&super::SeriesRow) -> Option<f64>| -> Vec<(f64, f64)> {
-        s.iter().filter_map(|r| f(r).map(|v| (r.t, v.min(v_max)))).collect()
+        s.iter().filter_map(|r| f(r).map(|v| (r.t(), v.min(v_max)))).collect()
     };
-    let raw_color = RGBColor(230, 150, 150);
+    let now_color = RGBColor(170, 170, 170);
     chart
-        .draw_series(LineSeries::new(line(|r| r.est_raw_mps), raw_color.stroke_width(1)))
+        .draw_series(LineSeries::new(line(|r| r.true_now_mps), now_color.stroke_width(1)))
         .map_err(|e| err(e.to_string()))?
-        .label("estimated, no post-processing")
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], raw_color));
+        .label("ground truth at t")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], now_color));
     chart
         .draw_series(LineSeries::new(line(|r| r.true_mps), BLACK.stroke_width(2)))
         .map_err(|e| err(e.to_string()))?
         .label(format!("ground truth at t - {:.2} s (estimate latency)", report.latency_s))
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
     chart
-        .draw_series(LineSeries::new(line(|r| r.est_mps), BLUE.stroke_width(2)))
+        .draw_series(LineSeries::new(line(super::SeriesRow::est_mps), BLUE.stroke_width(2)))
         .map_err(|e| err(e.to_string()))?
         .label("estimated (fme)")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));

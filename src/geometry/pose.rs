@@ -25,6 +25,11 @@ impl Pose {
         Ok(Self { rotation, translation })
     }
 
+    /// The identity: camera and world frames coincide.
+    pub fn identity() -> Self {
+        Self { rotation: Matrix3::identity(), translation: Vector3::zeros() }
+    }
+
     /// A camera at `eye` (world) looking at `target`, with the world's `up` direction appearing as
     /// "up" in the image (i.e. towards negative camera y).
     ///

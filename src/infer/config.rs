@@ -1,6 +1,5 @@
-//! Settings of the inference stage, meant to be embedded as sections of the fme TOML file
-//! (`[detector]`, `[depth]`, `[schedule]`). Every field has a default; `validate`
-//! names the offending key.
+//! Settings of the inference stage: the `[detector]` and `[depth]` sections of the config. Each
+//! network's rate, threads and model live with it; every command reads these same types.
 
 use std::path::PathBuf;
 
@@ -8,52 +7,79 @@ use serde::{Deserialize, Serialize};
 
 use super::InferError;
 use super::frame::Normalize;
+use super::runtime::SessionOptions;
+use crate::metric::{DepthSample, FitMethod};
 
-/// The detector (Ultralytics YOLOv8/YOLO11 export convention).
+/// Most detections kept per frame (the tracker's fixed capacity).
+pub const MAX_DETECTIONS: usize = 256;
+
+/// `[detector]`: the fish detector (Ultralytics YOLOv8/YOLO11 export convention).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DetectorConfig {
-    /// ONNX model file.
+    /// ONNX model file (relative paths: the working directory, then the install prefix of the
+    /// executable, see [`super::runtime::resolve_model`]).
     pub model: PathBuf,
-    /// Input `[width, height]`; required only when the model's input size is dynamic, and must
-    /// match the model when both are given.
-    pub input_size: Option<[u32; 2]>,
-    /// Expected number of classes; checked against the model's output when given.
-    pub num_classes: Option<usize>,
-    /// Minimum class score of a detection (Ultralytics `conf`).
-    pub conf_threshold: f32,
-    /// IoU above which a lower-scoring box of the same class is suppressed (Ultralytics `iou`).
-    pub iou_threshold: f32,
+    /// Detector runs per second of frame time, Hz (decoupled from the camera rate; frames in between
+    /// are only predicted by the tracker). 0 = every frame.
+    pub rate_hz: f64,
+    /// Minimum detection confidence, 0..1 (Ultralytics `conf`).
+    pub confidence: f64,
+    /// Non-maximum-suppression IoU threshold, 0..1 (Ultralytics `iou`).
+    pub nms_iou: f64,
+    /// ONNX Runtime intra-op threads.
+    pub threads: usize,
+    /// Let ONNX Runtime's idle worker threads spin between operators (with `threads >= 2`): lower
+    /// latency, more CPU; off leaves the cores to the tracker and the other network.
+    pub spin: bool,
+    /// Drop detections on the calibrated reference cubes (they look like small fish to a detector).
+    pub ignore_references: bool,
     /// Suppress across classes.
     pub class_agnostic: bool,
-    /// Most detections kept per frame.
+    /// Most detections kept per frame, 1..=256.
     pub max_detections: usize,
     /// Most candidates entering NMS (highest scores first).
     pub max_candidates: usize,
+    /// Input `[width, height]`; required only when the model's input size is dynamic, and must
+    /// match the model when both are given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub input_size: Option<[u32; 2]>,
+    /// Expected number of classes; checked against the model's output when given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub num_classes: Option<usize>,
 }
 
 impl Default for DetectorConfig {
     fn default() -> Self {
         Self {
             model: PathBuf::from("models/fish_det_int8.onnx"),
+            rate_hz: 10.0,
+            confidence: 0.3,
+            nms_iou: 0.5,
+            threads: 1,
+            spin: false,
+            ignore_references: true,
+            class_agnostic: true,
+            max_detections: MAX_DETECTIONS,
+            max_candidates: 3000,
             input_size: None,
             num_classes: None,
-            conf_threshold: 0.25,
-            iou_threshold: 0.7,
-            class_agnostic: false,
-            max_detections: 300,
-            max_candidates: 3000,
         }
     }
 }
 
 impl DetectorConfig {
-    /// Checks ranges.
+    /// Checks ranges; the error names the key.
     pub fn validate(&self) -> Result<(), InferError> {
-        unit("detector.conf_threshold", self.conf_threshold)?;
-        unit("detector.iou_threshold", self.iou_threshold)?;
-        if self.max_detections == 0 {
-            return Err(InferError::Config { key: "detector.max_detections", reason: "must be at least 1".into() });
+        rate("detector.rate_hz", self.rate_hz)?;
+        unit("detector.confidence", self.confidence)?;
+        unit("detector.nms_iou", self.nms_iou)?;
+        threads("detector.threads", self.threads)?;
+        if self.max_detections == 0 || self.max_detections > MAX_DETECTIONS {
+            return Err(InferError::Config {
+                key: "detector.max_detections",
+                reason: format!("must be 1..={MAX_DETECTIONS}, got {}", self.max_detections),
+            });
         }
         if self.max_candidates < self.max_detections {
             return Err(InferError::Config {
@@ -63,46 +89,70 @@ impl DetectorConfig {
         }
         size("detector.input_size", self.input_size)
     }
+
+    /// The ONNX Runtime session options of this network.
+    pub fn session(&self) -> SessionOptions {
+        SessionOptions { intra_threads: self.threads, spin: self.spin }
+    }
 }
 
-/// The relative-depth network (MiDaS v2.1 small / Depth Anything V2 convention).
+/// `[depth]`: the relative-depth network (MiDaS v2.1 small / Depth Anything V2 convention) and how
+/// its map becomes metres (paper eq. 1-2).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DepthConfig {
-    /// ONNX model file.
+    /// ONNX relative (inverse) depth model file.
     pub model: PathBuf,
-    /// Input `[width, height]`; required only when the model's input size is dynamic (Depth
-    /// Anything: multiples of 14; MiDaS: multiples of 32).
-    pub input_size: Option<[u32; 2]>,
-    /// Channel means (R, G, B) in 0..1 units, subtracted after `/255`. ImageNet by default; use
-    /// `[0, 0, 0]` for the official MiDaS v2.1 small ONNX, which normalises inside the graph.
-    pub mean: [f32; 3],
-    /// Channel standard deviations (R, G, B); `[1, 1, 1]` for the official MiDaS ONNX.
-    pub std: [f32; 3],
-    /// Half-size, in depth-map pixels, of the window whose median is returned by a sample
-    /// (0 = the nearest map pixel, at most 3).
-    pub sample_radius: u32,
+    /// Depth-network runs per second of frame time, Hz. 0 = every frame.
+    pub rate_hz: f64,
+    /// ONNX Runtime intra-op threads.
+    pub threads: usize,
+    /// Let ONNX Runtime's idle worker threads spin between operators (with `threads >= 2`).
+    pub spin: bool,
     /// Also run the network on the mirrored frame and average the two maps (test-time
     /// augmentation: twice the depth time, less of the network's per-frame noise).
     pub flip: bool,
+    /// Metric fit of relative inverse depth on the reference objects (paper eq. 2 and Table 4).
+    pub fit: FitMethod,
+    /// How a fish's depth is read from the map (see [`DepthSample`]).
+    pub sample: DepthSample,
+    /// Channel means (R, G, B) in 0..1 units, subtracted after `/255`. ImageNet by default; use
+    /// `[0, 0, 0]` for the official MiDaS v2.1 small ONNX, which normalises inside the graph.
+    pub mean: [f64; 3],
+    /// Channel standard deviations (R, G, B); `[1, 1, 1]` for the official MiDaS ONNX.
+    pub std: [f64; 3],
+    /// Half-size, in depth-map pixels, of the window whose median a point sample returns
+    /// (0 = the nearest map pixel, at most 3).
+    pub sample_radius: u32,
+    /// Input `[width, height]`; required only when the model's input size is dynamic (Depth
+    /// Anything: multiples of 14; MiDaS: multiples of 32).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub input_size: Option<[u32; 2]>,
 }
 
 impl Default for DepthConfig {
     fn default() -> Self {
         Self {
             model: PathBuf::from("models/fish_depth_int8.onnx"),
-            input_size: None,
-            mean: Normalize::IMAGENET.mean,
-            std: Normalize::IMAGENET.std,
-            sample_radius: 1,
+            rate_hz: 5.0,
+            threads: 1,
+            spin: false,
             flip: false,
+            fit: FitMethod::Robust,
+            sample: DepthSample::Visible,
+            mean: [0.485, 0.456, 0.406],
+            std: [0.229, 0.224, 0.225],
+            sample_radius: 1,
+            input_size: None,
         }
     }
 }
 
 impl DepthConfig {
-    /// Checks ranges.
+    /// Checks ranges; the error names the key.
     pub fn validate(&self) -> Result<(), InferError> {
+        rate("depth.rate_hz", self.rate_hz)?;
+        threads("depth.threads", self.threads)?;
         if self.std.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
             return Err(InferError::Config { key: "depth.std", reason: format!("{:?} must be positive", self.std) });
         }
@@ -120,39 +170,28 @@ impl DepthConfig {
 
     /// The normalisation these settings give.
     pub fn normalize(&self) -> Normalize {
-        Normalize { mean: self.mean, std: self.std }
+        Normalize { mean: self.mean.map(|v| v as f32), std: self.std.map(|v| v as f32) }
+    }
+
+    /// The ONNX Runtime session options of this network.
+    pub fn session(&self) -> SessionOptions {
+        SessionOptions { intra_threads: self.threads, spin: self.spin }
     }
 }
 
-/// Reduced-rate scheduling (Frigate style: detection decoupled from the camera rate).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ScheduleConfig {
-    /// Detector runs per second of frame time; 0 = every frame.
-    pub detect_hz: f64,
-    /// Depth-network runs per second of frame time; 0 = every frame.
-    pub depth_hz: f64,
-}
-
-impl Default for ScheduleConfig {
-    fn default() -> Self {
-        Self { detect_hz: 10.0, depth_hz: 2.0 }
-    }
-}
-
-impl ScheduleConfig {
-    /// Checks ranges.
-    pub fn validate(&self) -> Result<(), InferError> {
-        for (key, v) in [("schedule.detect_hz", self.detect_hz), ("schedule.depth_hz", self.depth_hz)] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(InferError::Config { key, reason: format!("{v} must be a finite rate >= 0 Hz") });
-            }
-        }
+fn rate(key: &'static str, v: f64) -> Result<(), InferError> {
+    if v.is_finite() && v >= 0.0 {
         Ok(())
+    } else {
+        Err(InferError::Config { key, reason: format!("{v} must be a finite rate >= 0 Hz (0 = every frame)") })
     }
 }
 
-fn unit(key: &'static str, v: f32) -> Result<(), InferError> {
+fn threads(key: &'static str, n: usize) -> Result<(), InferError> {
+    if (1..=64).contains(&n) { Ok(()) } else { Err(InferError::Config { key, reason: format!("{n} must be 1..=64") }) }
+}
+
+fn unit(key: &'static str, v: f64) -> Result<(), InferError> {
     if (0.0..=1.0).contains(&v) {
         Ok(())
     } else {
@@ -177,20 +216,19 @@ mod tests {
     fn defaults_validate_and_parse_from_toml() {
         DetectorConfig::default().validate().unwrap();
         DepthConfig::default().validate().unwrap();
-        ScheduleConfig::default().validate().unwrap();
-        let d: DetectorConfig = toml::from_str("model = \"a.onnx\"\niou_threshold = 0.5").unwrap();
-        assert_eq!(d.iou_threshold, 0.5);
-        assert_eq!(d.conf_threshold, 0.25);
+        let d: DetectorConfig = toml::from_str("model = \"a.onnx\"\nnms_iou = 0.4").unwrap();
+        assert_eq!(d.nms_iou, 0.4);
+        assert_eq!(d.confidence, 0.3);
         assert!(toml::from_str::<DetectorConfig>("modle = \"a.onnx\"").is_err());
     }
 
     #[test]
     fn bad_values_name_the_key() {
-        let d = DetectorConfig { iou_threshold: 1.5, ..Default::default() };
-        assert!(d.validate().unwrap_err().to_string().contains("detector.iou_threshold"));
+        let d = DetectorConfig { nms_iou: 1.5, ..Default::default() };
+        assert!(d.validate().unwrap_err().to_string().contains("detector.nms_iou"));
         let d = DepthConfig { std: [0.2, 0.0, 0.2], ..Default::default() };
         assert!(d.validate().unwrap_err().to_string().contains("depth.std"));
-        let s = ScheduleConfig { depth_hz: -1.0, ..Default::default() };
-        assert!(s.validate().unwrap_err().to_string().contains("schedule.depth_hz"));
+        let d = DepthConfig { rate_hz: -1.0, ..Default::default() };
+        assert!(d.validate().unwrap_err().to_string().contains("depth.rate_hz"));
     }
 }

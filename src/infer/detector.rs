@@ -132,11 +132,11 @@ impl Detector {
             });
         }
         let n = dims[2] as usize;
-        decode_yolo(data, self.nc, n, self.cfg.conf_threshold, lb, &mut self.dets);
+        decode_yolo(data, self.nc, n, self.cfg.confidence as f32, lb, &mut self.dets);
         drop(outputs);
         nms(
             &mut self.dets,
-            self.cfg.iou_threshold as f64,
+            self.cfg.nms_iou,
             self.cfg.class_agnostic,
             self.cfg.max_candidates,
             self.cfg.max_detections,

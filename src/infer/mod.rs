@@ -18,7 +18,7 @@ mod letterbox;
 pub mod runtime;
 mod scheduler;
 
-pub use config::{DepthConfig, DetectorConfig, ScheduleConfig};
+pub use config::{DepthConfig, DetectorConfig, MAX_DETECTIONS};
 pub use decode::{Detection, clip_to_frame, decode_yolo, nms};
 pub use depth::{DepthNet, MAX_SAMPLE_RADIUS, RelDepthMap};
 pub use detector::{Detections, Detector};

@@ -2,7 +2,6 @@
 //! tracker predicts in between (Frigate-style decoupling of detection rate from camera rate).
 //! Time always comes from the frames, never from an assumed frame period.
 
-use super::config::ScheduleConfig;
 use crate::units::Seconds;
 
 /// Slack for timestamp jitter: a frame up to this early still counts as on time. 2 ms absorbs
@@ -74,9 +73,10 @@ pub struct InferSchedule {
 }
 
 impl InferSchedule {
-    /// From the `[schedule]` settings.
-    pub fn new(cfg: &ScheduleConfig) -> Self {
-        Self { detect: RateScheduler::new(cfg.detect_hz), depth: RateScheduler::new(cfg.depth_hz) }
+    /// Detector and depth rates in runs per second of frame time (`detector.rate_hz`,
+    /// `depth.rate_hz`); 0 runs on every frame.
+    pub fn new(detect_hz: f64, depth_hz: f64) -> Self {
+        Self { detect: RateScheduler::new(detect_hz), depth: RateScheduler::new(depth_hz) }
     }
 
     /// The plan for the frame at `t`.

@@ -160,29 +160,6 @@ fn all_mask(n: usize) -> u32 {
 /// Default inlier tolerance of [`fit_robust`]: `max(0.1 m, 5% of the depth)`.
 pub const ROBUST_INLIER: (Metres, f64) = (Metres(0.1), 0.05);
 
-/// The scale/shift fits a deployment chooses from (`depth.fit`, `fme eval --fit`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum FitMethod {
-    /// The paper's eq. 2, `D = s*R + t`.
-    Linear,
-    /// `1/D = s*R + t`.
-    Inverse,
-    /// The inverse model by [`fit_robust`] (survives one or two fouled or hidden references).
-    Robust,
-}
-
-impl FitMethod {
-    /// Fits `refs`; `inlier` is the robust fit's tolerance (see [`fit_robust`]).
-    pub fn fit(self, refs: &[ReferencePair], inlier: (Metres, f64)) -> Result<ScaleShift, FitError> {
-        match self {
-            Self::Linear => fit(DepthModel::Linear, refs),
-            Self::Inverse => fit(DepthModel::Inverse, refs),
-            Self::Robust => fit_robust(DepthModel::Inverse, refs, inlier.0, inlier.1),
-        }
-    }
-}
-
 /// Least-squares fit of `model` over all usable references (paper eq. 1).
 pub fn fit(model: DepthModel, refs: &[ReferencePair]) -> Result<ScaleShift, FitError> {
     least_squares(model, &refs[..refs.len().min(MAX_REFERENCES)], all_mask(refs.len()))

@@ -10,16 +10,18 @@
 //!   which survives one or two fouled or hidden references.
 //!
 //! The paper's other regressors (2nd-order polynomial, decision tree, k-nearest neighbours, Table 4)
-//! live in [`regressors`] and are for the evaluation table only.
+//! live in [`regressors`]; [`FitMethod`] (`depth.fit`) chooses among all of them.
 //!
 //! Nothing here allocates: references are held in a fixed-capacity list of [`MAX_REFERENCES`].
 
 mod fit;
+mod method;
 mod references;
 pub mod regressors;
 mod sample;
 
-pub use fit::{DepthModel, FitError, FitMethod, ROBUST_INLIER, ReferencePair, References, ScaleShift, fit, fit_robust};
+pub use fit::{DepthModel, FitError, ROBUST_INLIER, ReferencePair, References, ScaleShift, fit, fit_robust};
+pub use method::{DepthFit, FitMethod};
 pub use references::{ReferenceFootprints, ReferencePoints};
 pub use sample::{
     CORE_FRAC, DepthSample, MAX_OVERLAPS, MAX_RADIUS, MIN_VISIBLE_POINTS, MIN_VISIBLE_POINTS_BEHIND, MapKind, Overlaps,

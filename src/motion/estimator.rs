@@ -88,87 +88,90 @@ fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
-/// Motion settings (the `[motion]` config section).
+/// Most fish the estimator holds at once; its table is allocated once with this size.
+pub const MAX_FISH: usize = 256;
+
+/// Motion settings: the `[motion]` section of the config (paper eq. 5 and the activity sample).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MotionConfig {
-    /// Most tracks held at once; the table is allocated once with this size.
-    pub max_tracks: usize,
-    /// Fish body length for body lengths/s; `None`: estimated per track ([`super::heading::fish_length`]).
-    pub body_length: Option<Metres>,
+    /// Mean fish body length for body lengths/s, m; 0 = estimated per fish
+    /// ([`super::heading::fish_length`]).
+    pub body_length_m: Metres,
+    /// Fewer fish in the mean than this raises the "too few fish" status bit.
+    pub min_fish: u32,
+    /// Time constant of the exponential smoothing of the activity index, s.
+    pub smoothing_s: Seconds,
     /// Speed is taken over the oldest stored position at most this long ago (at least the previous
-    /// one): 0 = frame to frame, as the paper; default 1 s. Longer spans trade latency for less noise
-    /// (at most 32 positions are kept, so spans beyond 32 frames use the oldest of those).
-    pub speed_span: Seconds,
-    /// A fish enters the mean only once it has been tracked this long: a young track's speed is a
-    /// chord over its first few frames, noisy and biased (measured too high with the depth chord,
-    /// where `|v|` rectifies the noise, and too low with the heading method; README "Young tracks out
-    /// of the mean"). 0 = every fish with two positions, as the paper.
-    pub min_age: Seconds,
+    /// one), s: 0 = frame to frame, as the paper. Longer spans trade latency for less noise (at most
+    /// 32 positions are kept, so spans beyond 32 frames use the oldest of those).
+    pub speed_span_s: Seconds,
+    /// A fish enters the mean only once it has been tracked this long, s: a young track's speed is a
+    /// chord over its first few frames, noisy and biased. 0 = every fish with two positions, as the
+    /// paper.
+    pub min_age_s: Seconds,
     /// Chord (the paper) or least-squares regression over the span.
     pub speed_method: SpeedMethod,
-    /// Where the speed along the line of sight comes from: the change of depth (the paper) or the
-    /// fish's heading ([`super::heading`]).
+    /// Where the speed along the line of sight comes from: the fish's heading
+    /// ([`super::heading`]) or the change of its depth (the paper).
     pub along_ray: AlongRay,
     /// A fish's width over its length, as seen head-on (salmon about 0.1): the heading method's
     /// foreshortening model.
     pub body_width_ratio: f64,
-    /// Time constant of the exponential smoothing of the activity index.
-    pub smoothing: Seconds,
-    /// A track not seen for this long is forgotten (its slot is reused).
-    pub track_timeout: Seconds,
-    /// Per-fish speeds above this are treated as glitches and left out of the mean.
-    pub max_speed: MetresPerSecond,
+    /// A track not seen for this long is forgotten (its slot is reused), s.
+    pub track_timeout_s: Seconds,
+    /// Per-fish speeds above this are treated as glitches and left out of the mean, m/s.
+    pub max_speed_mps: MetresPerSecond,
 }
 
 impl Default for MotionConfig {
     fn default() -> Self {
         Self {
-            max_tracks: 256,
-            body_length: None,
-            // Measured on synthetic swarms (scripts/ablation.sh): 1 s chords cut the swarm speed RMSE
-            // from 0.23 to 0.016 m/s against the paper's frame-to-frame speed; the estimate then
-            // refers to t - 0.5 s (`ActivitySample::latency`).
-            speed_span: Seconds(1.0),
-            // A full span before a fish counts: group D on 12 held-out swarms 0.0228 -> 0.0196 m/s,
-            // 0.0192 -> 0.0182 on the frames from 2 s on (README "Young tracks out of the mean").
-            min_age: Seconds(1.0),
+            body_length_m: Metres(0.35),
+            min_fish: 3,
+            smoothing_s: Seconds(60.0),
+            // 1 s chords instead of the paper's frame-to-frame speed (docs/accuracy.md, ablations);
+            // the estimate then refers to t - 0.5 s (`SwarmEstimate::latency`).
+            speed_span_s: Seconds(1.0),
+            // A full span before a fish counts (docs/accuracy.md, ablations).
+            min_age_s: Seconds(1.0),
             speed_method: SpeedMethod::Chord,
             along_ray: AlongRay::Heading,
             body_width_ratio: 0.1,
-            smoothing: Seconds(2.0),
-            track_timeout: Seconds(1.0),
-            max_speed: MetresPerSecond(10.0),
+            track_timeout_s: Seconds(1.0),
+            max_speed_mps: MetresPerSecond(10.0),
         }
     }
 }
 
 impl MotionConfig {
+    /// The configured body length, or `None` when it is estimated per fish (`body_length_m = 0`).
+    pub fn body_length(&self) -> Option<Metres> {
+        (self.body_length_m.0 > 0.0).then_some(self.body_length_m)
+    }
+
     /// Checks ranges; the error names the key.
     pub fn validate(&self) -> Result<(), &'static str> {
-        if self.max_tracks == 0 || self.max_tracks > 4096 {
-            return Err("motion.max_tracks must be within 1..=4096");
+        if !(self.body_length_m.0.is_finite() && self.body_length_m.0 >= 0.0) {
+            return Err("motion.body_length_m must be >= 0 m (0 = estimated per fish)");
         }
-        if self.body_length.is_some_and(|l| !(l.0.is_finite() && l.0 > 0.0)) {
-            return Err("motion.body_length must be a positive number of metres");
+        if !(self.speed_span_s.0.is_finite() && self.speed_span_s.0 >= 0.0) {
+            return Err("motion.speed_span_s must be zero or a positive number of seconds");
         }
-        if !(self.speed_span.0.is_finite() && self.speed_span.0 >= 0.0) {
-            return Err("motion.speed_span must be zero or a positive number of seconds");
-        }
-        if !(self.min_age.0.is_finite() && self.min_age.0 >= 0.0) {
-            return Err("motion.min_age must be zero or a positive number of seconds");
+        if !(self.min_age_s.0.is_finite() && self.min_age_s.0 >= 0.0) {
+            return Err("motion.min_age_s must be zero or a positive number of seconds");
         }
         if !(self.body_width_ratio.is_finite() && (0.0..=0.5).contains(&self.body_width_ratio)) {
             return Err("motion.body_width_ratio must be within 0..=0.5");
         }
-        if !(self.smoothing.0.is_finite() && self.smoothing.0 > 0.0) {
-            return Err("motion.smoothing must be a positive number of seconds");
+        if !(self.smoothing_s.0.is_finite() && self.smoothing_s.0 > 0.0) {
+            return Err("motion.smoothing_s must be a positive number of seconds");
         }
-        if !(self.track_timeout.0.is_finite() && self.track_timeout.0 > 0.0) {
-            return Err("motion.track_timeout must be a positive number of seconds");
+        if !(self.track_timeout_s.0.is_finite() && self.track_timeout_s.0 > 0.0) {
+            return Err("motion.track_timeout_s must be a positive number of seconds");
         }
-        if !(self.max_speed.0.is_finite() && self.max_speed.0 > 0.0) {
-            return Err("motion.max_speed must be a positive speed in m/s");
+        if !(self.max_speed_mps.0.is_finite() && self.max_speed_mps.0 > 0.0) {
+            return Err("motion.max_speed_mps must be a positive speed in m/s");
         }
         Ok(())
     }
@@ -188,7 +191,7 @@ pub struct TrackObservation {
 
 /// The activity index at one frame.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
-pub struct ActivitySample {
+pub struct SwarmEstimate {
     /// Frame timestamp.
     pub t: Seconds,
     /// Number of fish whose speed entered the mean.
@@ -199,7 +202,7 @@ pub struct ActivitySample {
     pub ci95: Option<(MetresPerSecond, MetresPerSecond)>,
     /// Mean of each fish's speed in its own body lengths per second.
     pub mean_bls: Option<f64>,
-    /// The mean smoothed by an EWMA with time constant `motion.smoothing` (holds its last value
+    /// The mean smoothed by an EWMA with time constant `motion.smoothing_s` (holds its last value
     /// through frames without fish).
     pub smoothed: Option<MetresPerSecond>,
     /// Observations whose box was corrected by eq. 3 this frame.
@@ -270,6 +273,7 @@ impl TrackState {
 /// Turns per-frame tracked boxes into the activity index. See the module documentation.
 #[derive(Debug, Clone)]
 pub struct ActivityEstimator {
+    capacity: usize,
     camera: Camera,
     motion: MotionConfig,
     post: PostprocessConfig,
@@ -283,13 +287,19 @@ pub struct ActivityEstimator {
 }
 
 impl ActivityEstimator {
-    /// An estimator for a calibrated camera. Allocates the track table (`motion.max_tracks`) once.
+    /// An estimator for a calibrated camera. Allocates the track table ([`MAX_FISH`]) once.
     pub fn new(camera: Camera, motion: MotionConfig, post: PostprocessConfig) -> Self {
+        Self::with_capacity(MAX_FISH, camera, motion, post)
+    }
+
+    /// An estimator holding at most `capacity` fish (1..=[`MAX_FISH`]); allocates its table once.
+    pub fn with_capacity(capacity: usize, camera: Camera, motion: MotionConfig, post: PostprocessConfig) -> Self {
         Self {
+            capacity: capacity.clamp(1, MAX_FISH),
             camera,
             motion,
             post,
-            tracks: Vec::with_capacity(motion.max_tracks),
+            tracks: Vec::with_capacity(capacity.clamp(1, MAX_FISH)),
             smoothed: None,
             swarm_lengths: LengthHistogram::default(),
             swarm_lengths_t: f64::NAN,
@@ -312,7 +322,7 @@ impl ActivityEstimator {
         self.post
     }
 
-    /// Tracks currently held (seen within `motion.track_timeout`).
+    /// Tracks currently held (seen within `motion.track_timeout_s`).
     pub fn tracks(&self) -> impl Iterator<Item = TrackView> + '_ {
         self.tracks.iter().map(|s| TrackView {
             id: s.id,
@@ -327,11 +337,11 @@ impl ActivityEstimator {
     }
 
     fn length_of(&self, s: &TrackState) -> Option<Metres> {
-        self.motion.body_length.or_else(|| fish_length(&s.lengths, self.swarm_floor))
+        self.motion.body_length().or_else(|| fish_length(&s.lengths, self.swarm_floor))
     }
 
     /// One frame, with the depth carried by each observation (sampled at the raw box centre).
-    pub fn update(&mut self, t: Seconds, observations: &[TrackObservation]) -> ActivitySample {
+    pub fn update(&mut self, t: Seconds, observations: &[TrackObservation]) -> SwarmEstimate {
         self.update_with(t, observations, |o, _| o.depth)
     }
 
@@ -342,8 +352,8 @@ impl ActivityEstimator {
         t: Seconds,
         observations: &[TrackObservation],
         mut depth_at: impl FnMut(&TrackObservation, Pixel) -> Option<Metres>,
-    ) -> ActivitySample {
-        let mut out = ActivitySample { t, ..Default::default() };
+    ) -> SwarmEstimate {
+        let mut out = SwarmEstimate { t, ..Default::default() };
         let (mut n, mut sum, mut sum_sq, mut lag) = (0usize, 0.0, 0.0, 0.0);
         let (mut n_bl, mut sum_bl) = (0usize, 0.0);
         // The swarm's lengths fade with time, so they follow the fish in view.
@@ -357,10 +367,10 @@ impl ActivityEstimator {
         }
         // Lengths are only needed by the heading method and for an estimated body length: with the
         // depth chord and a configured length, none of this runs per fish.
-        let wants_lengths = self.motion.along_ray == AlongRay::Heading || self.motion.body_length.is_none();
+        let wants_lengths = self.motion.along_ray == AlongRay::Heading || self.motion.body_length().is_none();
         self.swarm_floor = if wants_lengths { swarm_floor(&self.swarm_lengths) } else { None };
         // Forget tracks not seen for too long, so their slots can be reused.
-        let timeout = self.motion.track_timeout.0;
+        let timeout = self.motion.track_timeout_s.0;
         self.tracks.retain(|s| t.0 - s.last_seen <= timeout || !t.0.is_finite());
         for obs in observations {
             if !obs.bbox.is_valid() || !t.0.is_finite() {
@@ -369,7 +379,7 @@ impl ActivityEstimator {
             }
             let idx = match self.tracks.iter().position(|s| s.id == obs.id) {
                 Some(i) => i,
-                None if self.tracks.len() < self.motion.max_tracks => {
+                None if self.tracks.len() < self.capacity => {
                     self.tracks.push(TrackState::new(obs.id, t.0));
                     self.tracks.len() - 1
                 }
@@ -411,7 +421,7 @@ impl ActivityEstimator {
             while s.positions.front().is_some_and(|p| t.0 - p.t > timeout) || s.positions.is_full() {
                 s.positions.pop_front();
             }
-            let span = self.motion.speed_span.0;
+            let span = self.motion.speed_span_s.0;
             let reference = s.positions.iter().find(|p| within(p, t.0, span)).or(s.positions.back()).copied();
             let now = Sample { t: t.0, p: [point.0.x, point.0.y, point.0.z], range, apparent };
             let _ = s.positions.push_back(now);
@@ -452,19 +462,19 @@ impl ActivityEstimator {
                     (cos.map_or(f64::NAN, |c| speed_from_heading(across, c, depth_chord)), t_ref)
                 }
             };
-            if !v.is_finite() || v > self.motion.max_speed.0 {
+            if !v.is_finite() || v > self.motion.max_speed_mps.0 {
                 out.skipped += 1;
                 continue;
             }
             s.speed = Some(v);
-            if t.0 - s.first_seen < self.motion.min_age.0 * (1.0 - 1e-6) {
+            if t.0 - s.first_seen < self.motion.min_age_s.0 * (1.0 - 1e-6) {
                 continue;
             }
             n += 1;
             sum += v;
             sum_sq += v * v;
             lag += t.0 - t_ref;
-            if let Some(l) = self.motion.body_length.or_else(estimated_length) {
+            if let Some(l) = self.motion.body_length().or_else(estimated_length) {
                 n_bl += 1;
                 sum_bl += v / l.0;
             }
@@ -476,7 +486,7 @@ impl ActivityEstimator {
             out.ci95 = Some((MetresPerSecond(lo.max(0.0)), MetresPerSecond(hi)));
             self.smoothed = Some(match self.smoothed {
                 Some((t_prev, s)) if t.0 > t_prev => {
-                    let a = 1.0 - (-(t.0 - t_prev) / self.motion.smoothing.0).exp();
+                    let a = 1.0 - (-(t.0 - t_prev) / self.motion.smoothing_s.0).exp();
                     (t.0, s + a * (mean - s))
                 }
                 Some((t_prev, s)) => (t_prev, s),
@@ -512,12 +522,17 @@ mod tests {
     #[test]
     fn speed_of_known_trajectories_with_irregular_timestamps() {
         let cam = camera();
-        // Every fish in the mean from its second position (`min_age` 0, as the paper).
-        let cfg = MotionConfig { along_ray: AlongRay::Depth, min_age: Seconds(0.0), ..Default::default() };
+        // Every fish in the mean from its second position (`min_age` 0, as the paper); lengths estimated.
+        let cfg = MotionConfig {
+            along_ray: AlongRay::Depth,
+            min_age_s: Seconds(0.0),
+            body_length_m: Metres(0.0),
+            ..Default::default()
+        };
         let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::off());
         // Fish 1 at 0.5 m/s along world x; fish 2 at 0.3 m/s along world y (depth direction).
         let times = [0.0, 0.033, 0.07, 0.1, 0.15, 0.2, 0.26];
-        let mut last = ActivitySample::default();
+        let mut last = SwarmEstimate::default();
         for (i, &t) in times.iter().enumerate() {
             let obs = [
                 observe(&cam, 1, WorldPoint::new(-1.0 + 0.5 * t, 1.0, 1.2)),
@@ -549,15 +564,15 @@ mod tests {
     fn body_lengths_from_config_span_and_timeout() {
         let cam = camera();
         let cfg = MotionConfig {
-            body_length: Some(Metres(0.5)),
-            speed_span: Seconds(0.1),
-            min_age: Seconds(0.0),
+            body_length_m: Metres(0.5),
+            speed_span_s: Seconds(0.1),
+            min_age_s: Seconds(0.0),
             along_ray: AlongRay::Depth,
-            track_timeout: Seconds(0.5),
+            track_timeout_s: Seconds(0.5),
             ..Default::default()
         };
         let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::default());
-        let mut s = ActivitySample::default();
+        let mut s = SwarmEstimate::default();
         for i in 0..20 {
             let t = i as f64 / 30.0;
             s = est.update(Seconds(t), &[observe(&cam, 7, WorldPoint::new(0.2 * t, 1.0, 1.5))]);
@@ -580,13 +595,13 @@ mod tests {
         let cam = camera();
         for method in [SpeedMethod::Chord, SpeedMethod::Regression] {
             let cfg = MotionConfig {
-                speed_span: Seconds(0.5),
+                speed_span_s: Seconds(0.5),
                 speed_method: method,
                 along_ray: AlongRay::Depth,
                 ..Default::default()
             };
             let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::off());
-            let mut s = ActivitySample::default();
+            let mut s = SwarmEstimate::default();
             for i in 0..40 {
                 let t = i as f64 / 30.0;
                 // Accelerating along x: v(t) = 0.2 + 0.6 t.
@@ -604,7 +619,7 @@ mod tests {
     #[test]
     fn a_fish_enters_the_mean_once_it_is_old_enough() {
         let cam = camera();
-        let cfg = MotionConfig { min_age: Seconds(0.5), along_ray: AlongRay::Depth, ..Default::default() };
+        let cfg = MotionConfig { min_age_s: Seconds(0.5), along_ray: AlongRay::Depth, ..Default::default() };
         let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::off());
         // Fish 1 from t = 0 at 0.3 m/s; fish 2 appears at t = 1 s at 0.6 m/s.
         for i in 0..60 {
@@ -630,7 +645,7 @@ mod tests {
                 assert!((young.speed.unwrap().0 - 0.6).abs() < 1e-9);
             }
         }
-        assert!(MotionConfig { min_age: Seconds(f64::NAN), ..Default::default() }.validate().is_err());
+        assert!(MotionConfig { min_age_s: Seconds(f64::NAN), ..Default::default() }.validate().is_err());
     }
 
     /// Fish 0.4 m long (0.04 m wide, 0.08 m high) swimming at 0.5 m/s, first across the image, then
@@ -705,8 +720,8 @@ mod tests {
     #[test]
     fn bad_observations_are_skipped_not_propagated() {
         let cam = camera();
-        let cfg = MotionConfig { max_tracks: 1, min_age: Seconds(0.0), ..Default::default() };
-        let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::off());
+        let cfg = MotionConfig { min_age_s: Seconds(0.0), ..Default::default() };
+        let mut est = ActivityEstimator::with_capacity(1, cam, cfg, PostprocessConfig::off());
         let good = observe(&cam, 1, WorldPoint::new(0.0, 1.0, 1.5));
         let nan_box =
             TrackObservation { id: 2, bbox: PixelBox::new(f64::NAN, 0.0, 1.0, 1.0), depth: Some(Metres(1.0)) };
@@ -719,6 +734,6 @@ mod tests {
         assert_eq!(s.skipped, 1, "time did not increase for track 1");
         let s = est.update(Seconds(0.2), &[good]);
         assert_eq!((s.n_fish, s.mean), (1, Some(MetresPerSecond(0.0))));
-        assert!(MotionConfig { speed_span: Seconds(-1.0), ..Default::default() }.validate().is_err());
+        assert!(MotionConfig { speed_span_s: Seconds(-1.0), ..Default::default() }.validate().is_err());
     }
 }

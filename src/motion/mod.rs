@@ -2,7 +2,7 @@
 //!
 //! [`ActivityEstimator`] is the per-frame API the daemon and `fme eval` call: give it the frame's
 //! timestamp and the tracked boxes (with depth, or a function that samples depth at the corrected box
-//! centre) and it returns an [`ActivitySample`]: the swarm's mean 3D speed (eq. 5), the number of
+//! centre) and it returns an [`SwarmEstimate`]: the swarm's mean 3D speed (eq. 5), the number of
 //! fish, a 95% interval of the mean, an EWMA-smoothed value and the mean speed in body lengths/s.
 //!
 //! Per track it runs the post-processing of [`crate::postprocess`], lifts the corrected box centre
@@ -17,6 +17,8 @@ mod estimator;
 pub mod heading;
 mod stats;
 
-pub use estimator::{ActivityEstimator, ActivitySample, MotionConfig, SpeedMethod, TrackObservation, TrackView};
+pub use estimator::{
+    ActivityEstimator, MAX_FISH, MotionConfig, SpeedMethod, SwarmEstimate, TrackObservation, TrackView,
+};
 pub use heading::AlongRay;
 pub use stats::{mean_ci95, student_t975};

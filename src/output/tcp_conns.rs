@@ -31,6 +31,16 @@ pub struct TcpLimits {
     pub idle_timeout: Option<Duration>,
 }
 
+impl TcpLimits {
+    /// The limits `[output.modbus]` configures (`idle_timeout_ms = 0`: never close idle connections).
+    pub fn from_config(m: &crate::config::ModbusConfig) -> Self {
+        Self {
+            max_connections: m.max_connections as usize,
+            idle_timeout: (m.idle_timeout_ms > 0).then(|| Duration::from_millis(m.idle_timeout_ms)),
+        }
+    }
+}
+
 impl Default for TcpLimits {
     fn default() -> Self {
         Self { max_connections: 8, idle_timeout: Some(Duration::from_secs(60)) }

@@ -34,7 +34,7 @@ pub struct TrackFilter {
     prev_raw: Option<PixelBox>,
     depths: Deque<(f64, f64), HISTORY>,
     jump_since: Option<f64>,
-    /// `(t, depth)` of the exponential depth smoothing (`depth_smoothing`), after eq. 4.
+    /// `(t, depth)` of the exponential depth smoothing (`depth_smoothing_s`), after eq. 4.
     smoothed: Option<(f64, f64)>,
 }
 
@@ -63,7 +63,7 @@ impl TrackFilter {
     /// The box-fluctuation detector (eq. 3) and its EWMA correction for the observation at `t`.
     pub fn correct_box(&mut self, cfg: &PostprocessConfig, t: Seconds, raw: PixelBox) -> BoxCorrection {
         let t = t.0;
-        let keep = cfg.fluctuation_window.0.max(cfg.box_ewma_window.0);
+        let keep = cfg.box_window_s.0.max(cfg.box_ewma_s.0);
         // Time must increase; a gap longer than the window makes the history meaningless.
         if self.sizes.back().is_some_and(|last| t <= last.t || t - last.t > keep || t.is_nan()) {
             self.sizes.clear();
@@ -77,7 +77,7 @@ impl TrackFilter {
             // Mean absolute frame-to-frame change over the window (eq. 3's Avg(D_w), Avg(D_h)).
             let (mut sum_w, mut sum_h, mut n) = (0.0, 0.0, 0usize);
             let mut last: Option<&SizeSample> = None;
-            for s in self.sizes.iter().filter(|s| within(s.t, t, cfg.fluctuation_window.0)) {
+            for s in self.sizes.iter().filter(|s| within(s.t, t, cfg.box_window_s.0)) {
                 if let Some(l) = last {
                     sum_w += (s.w - l.w).abs();
                     sum_h += (s.h - l.h).abs();
@@ -85,10 +85,10 @@ impl TrackFilter {
                 }
                 last = Some(s);
             }
-            if n >= cfg.fluctuation_min_history.max(1) {
+            if n >= cfg.box_min_history.max(1) {
                 let fire_w = (raw.w - prev.w).abs() > sum_w / n as f64;
                 let fire_h = (raw.h - prev.h).abs() > sum_h / n as f64;
-                let recent = || self.sizes.iter().filter(|s| within(s.t, t, cfg.box_ewma_window.0));
+                let recent = || self.sizes.iter().filter(|s| within(s.t, t, cfg.box_ewma_s.0));
                 let n_recent = recent().count();
                 let mut w = raw.w;
                 let mut h = raw.h;
@@ -137,7 +137,7 @@ impl TrackFilter {
             return (None, false);
         };
         let t = t.0;
-        let window = cfg.depth_ewma_window.0;
+        let window = cfg.depth_window_s.0;
         if self.depths.back().is_some_and(|&(last_t, _)| t <= last_t || t - last_t > window || t.is_nan()) {
             self.depths.clear();
             self.jump_since = None;
@@ -149,9 +149,9 @@ impl TrackFilter {
         let mut out = d.0;
         let mut fired = false;
         if let (true, Some(&(_, prev))) = (cfg.depth_jump, self.depths.back()) {
-            if (d.0 - prev).abs() >= cfg.depth_jump_threshold.0 {
+            if (d.0 - prev).abs() >= cfg.depth_jump_m.0 {
                 let since = *self.jump_since.get_or_insert(t);
-                if t - since > cfg.depth_max_hold.0 + 1e-9 {
+                if t - since > cfg.depth_max_hold_s.0 + 1e-9 {
                     // Persistent: accept the new depth and restart the history from it.
                     self.depths.clear();
                     self.jump_since = None;
@@ -167,7 +167,7 @@ impl TrackFilter {
         // Not in the paper: an estimated depth map flickers from frame to frame, and over a 1 s
         // speed span that flicker becomes speed. An EWMA with time constant tau (real dt) keeps the
         // slope of a fish's real depth change and removes most of the flicker.
-        let tau = cfg.depth_smoothing.0;
+        let tau = cfg.depth_smoothing_s.0;
         if tau > 0.0 {
             let s = match self.smoothed {
                 Some((ts, prev)) if t > ts => prev + (1.0 - (-(t - ts) / tau).exp()) * (out - prev),
@@ -234,7 +234,7 @@ mod tests {
 
     #[test]
     fn depth_jump_is_bridged_and_a_persistent_change_accepted() {
-        let cfg = PostprocessConfig::default();
+        let cfg = PostprocessConfig { depth_smoothing_s: Seconds(0.0), ..PostprocessConfig::default() };
         let mut f = TrackFilter::new();
         let mut t = 0.0;
         let mut step = |f: &mut TrackFilter, d: f64| {
@@ -255,7 +255,7 @@ mod tests {
         }
         let (d, fired) = step(&mut f, 3.35);
         assert!(!fired && (d.unwrap().0 - 3.35).abs() < 1e-12);
-        // A jump that lasts more than depth_max_hold (1 s) is accepted.
+        // A jump that lasts more than depth_max_hold_s (1 s) is accepted.
         let mut accepted_at = None;
         for i in 0..40 {
             let (d, fired) = step(&mut f, 5.0);
@@ -277,7 +277,7 @@ mod tests {
     #[test]
     fn depth_smoothing_removes_flicker_and_keeps_the_slope() {
         let cfg =
-            PostprocessConfig { depth_smoothing: Seconds(2.0), depth_jump: false, ..PostprocessConfig::default() };
+            PostprocessConfig { depth_smoothing_s: Seconds(2.0), depth_jump: false, ..PostprocessConfig::default() };
         let mut f = TrackFilter::new();
         // A fish moving away at 0.3 m/s with +-0.2 m frame-to-frame flicker of the estimated depth.
         let mut out = Vec::new();
@@ -295,9 +295,10 @@ mod tests {
         // A reset starts a fresh track: its first depth is not blended with the old track's.
         f.reset();
         assert_eq!(f.correct_depth(&cfg, Seconds(20.0), Some(Metres(5.0))).0, Some(Metres(5.0)));
-        // Off by default: the raw value passes through.
+        // Off (0 s): the raw value passes through.
         let mut g = TrackFilter::new();
-        let off = PostprocessConfig { depth_jump: false, ..PostprocessConfig::default() };
+        let off =
+            PostprocessConfig { depth_jump: false, depth_smoothing_s: Seconds(0.0), ..PostprocessConfig::default() };
         assert_eq!(g.correct_depth(&off, Seconds(0.0), Some(Metres(2.0))).0, Some(Metres(2.0)));
         assert_eq!(g.correct_depth(&off, Seconds(DT), Some(Metres(2.4))).0, Some(Metres(2.4)));
     }

@@ -1,9 +1,9 @@
 //! Health published as first-class status: one shared snapshot read by the registers, the console
 //! and the watchdog, plus a small ring of recent log lines for the console `log` command.
 
-use super::pipeline::{ActivitySample, CalibInfo, StageHealth};
 use crate::output::bank::RegisterBank;
 use crate::output::registers::FaultCode;
+use crate::pipeline::{ActivitySample, CalibInfo, StageHealth};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};

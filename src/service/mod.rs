@@ -9,20 +9,17 @@
 //! The pipeline thread pings the systemd watchdog each loop turn (a stuck `Pipeline::process` stops
 //! the pings and systemd restarts the service); a camera outage does not (the loop keeps turning).
 //!
-//! [`build_pipeline`] returns the pipeline `fme run` uses ([`fish_pipeline::FishPipeline`]).
+//! [`build_pipeline`] returns the pipeline `fme run` uses ([`crate::pipeline::FishPipeline`]).
 
-pub mod calibration;
-pub mod fish_pipeline;
 pub mod health;
-pub mod pipeline;
 pub mod publish;
 
 use crate::capture::{Backoff, CaptureError, FrameQueue, FrameSource};
 use crate::config::{Config, ModbusMode};
 use crate::output::bank::RegisterBank;
 use crate::output::modbus::{self, ClientSettings, ClientTarget, ModbusError};
+use crate::pipeline::{Calibration, FishPipeline, Pipeline};
 use health::Shared;
-use pipeline::Pipeline;
 use publish::Publisher;
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
@@ -41,6 +38,9 @@ pub enum ServiceError {
     /// The pipeline could not be built.
     #[error("pipeline: {0}")]
     Pipeline(String),
+    /// The `--series` file could not be created.
+    #[error("--series: {0}")]
+    Series(String),
     /// A thread could not be spawned.
     #[error("cannot spawn {what}: {source}")]
     Spawn {
@@ -52,42 +52,27 @@ pub enum ServiceError {
 }
 
 /// Builds the pipeline `fme run` uses: detector + tracker + depth + post-processing + motion (paper
-/// eq. 1-5), see [`fish_pipeline`]. Model and ONNX Runtime problems are [`ServiceError::Pipeline`]
-/// naming the config key and the file.
+/// eq. 1-5), see [`crate::pipeline`]. Model, calibration and ONNX Runtime problems are
+/// [`ServiceError::Pipeline`] naming the config key and the file.
 pub fn build_pipeline(cfg: &Config) -> Result<Box<dyn Pipeline>, ServiceError> {
-    let calibration = calibration_for(cfg)?;
+    let calibration = Calibration::for_config(cfg).map_err(ServiceError::Pipeline)?;
     match &calibration {
         Some(c) => tracing::info!(file = %c.path.display(), references = c.references.len(), "camera calibration"),
         None => tracing::warn!(
             "no camera calibration (camera.calibration): fish are tracked but no speed is reported (status bit 3 clear)"
         ),
     }
-    let p = fish_pipeline::FishPipeline::new(cfg, calibration).map_err(ServiceError::Pipeline)?;
+    let p = FishPipeline::new(cfg, calibration).map_err(ServiceError::Pipeline)?;
     Ok(Box::new(p))
 }
 
-/// The calibration: `camera.calibration` when set, else a recorded source's own `meta.json`.
-fn calibration_for(cfg: &Config) -> Result<Option<calibration::Calibration>, ServiceError> {
-    let configured = &cfg.camera.calibration;
-    if !configured.as_os_str().is_empty() {
-        return calibration::Calibration::load(configured)
-            .map(Some)
-            .map_err(|e| ServiceError::Pipeline(format!("camera.calibration: {e}")));
-    }
-    let meta = cfg.source.path.join("meta.json");
-    if cfg.source.path.starts_with("/dev") || !meta.is_file() {
-        return Ok(None);
-    }
-    calibration::Calibration::load(&meta)
-        .map(Some)
-        .map_err(|e| ServiceError::Pipeline(format!("the recording's calibration: {e}")))
-}
-
 /// Run-time options not in the config file.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct RunOptions {
     /// Stop after this many processed frames (benchmarks).
     pub max_frames: Option<u64>,
+    /// Write every frame's sample to this CSV (`fme run --series`).
+    pub series: Option<std::path::PathBuf>,
 }
 
 /// A running daemon.
@@ -240,6 +225,7 @@ struct PipelineCtx {
     serial_tx: Option<std::sync::mpsc::SyncSender<String>>,
     output_period_s: f64,
     max_frames: Option<u64>,
+    series: Option<crate::pipeline::SeriesWriter>,
     watchdog: Option<Duration>,
     finished: tokio::sync::watch::Sender<bool>,
 }
@@ -266,7 +252,7 @@ fn pipeline_loop(mut c: PipelineCtx) {
         // A panic in a stage on one bad frame must not end the pipeline: count it as an error.
         let result = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| c.pipeline.process(&frame))) {
             Ok(r) => r,
-            Err(p) => Err(pipeline::PipelineError::Stage { stage: "pipeline", message: panic_text(&*p) }),
+            Err(p) => Err(crate::pipeline::PipelineError::Stage { stage: "pipeline", message: panic_text(&*p) }),
         };
         let now = Instant::now();
         processed += 1;
@@ -275,7 +261,17 @@ fn pipeline_loop(mut c: PipelineCtx) {
         let stage = c.pipeline.health();
         let calib = c.pipeline.calib();
         let sample = match result {
-            Ok(s) => s,
+            Ok(s) => {
+                if let (Some(w), Some(sample)) = (c.series.as_mut(), s) {
+                    let row = crate::pipeline::SeriesRow { frame: frame.seq + 1, sample };
+                    if let Err(e) = w.write(&row) {
+                        // Recording the series must never stop the pipeline: stop writing instead.
+                        c.shared.log(Level::ERROR, format!("--series: {e}; no more rows are written"));
+                        c.series = None;
+                    }
+                }
+                s
+            }
             Err(e) => {
                 errors += 1;
                 // First error and then every 100th: a flood of bad frames must not flood the journal.
@@ -331,6 +327,9 @@ fn pipeline_loop(mut c: PipelineCtx) {
             break;
         }
     }
+    if let Some(Err(e)) = c.series.take().map(crate::pipeline::SeriesWriter::finish) {
+        c.shared.log(Level::ERROR, format!("--series: {e}"));
+    }
     let _ = c.finished.send(true);
 }
 
@@ -377,6 +376,10 @@ impl Daemon {
         pipeline: Box<dyn Pipeline>,
         opts: RunOptions,
     ) -> Result<Self, ServiceError> {
+        let series = match &opts.series {
+            Some(p) => Some(crate::pipeline::SeriesWriter::create(p, "").map_err(ServiceError::Series)?),
+            None => None,
+        };
         let bank = Arc::new(RegisterBank::new());
         let shared = Arc::new(Shared::new(bank.clone(), config_text, cfg.console.log_lines));
         shared.with_health(|h| h.source = source.describe());
@@ -401,7 +404,7 @@ impl Daemon {
                 server_tasks.push(tokio::spawn(modbus::serve_tcp(
                     listener,
                     bank.clone(),
-                    m.tcp_limits(),
+                    crate::output::tcp_conns::TcpLimits::from_config(m),
                     async move {
                         let _ = rx.await;
                     },
@@ -488,6 +491,7 @@ impl Daemon {
             serial_tx: serial_tx.clone(),
             output_period_s: 1.0 / cfg.output.rate_hz,
             max_frames: opts.max_frames,
+            series,
             watchdog,
             finished: finished_tx,
         };

@@ -1,4 +1,5 @@
-//! Tracker configuration: the two presets and named keys (TOML, section `[track]` or top level).
+//! Tracker configuration: the `[tracker]` section of the config. A preset gives the base values and
+//! every other key overrides it; `fme run`, `fme eval`, `fme track` and `fme tune` read the same type.
 
 use super::kalman::CvNoise;
 
@@ -13,10 +14,24 @@ pub enum Mode {
     Byte,
 }
 
-/// All tracker settings. See the module docs of [`crate::track`] for the mapping onto the paper's
-/// Table 1.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+/// The base settings a `[tracker]` section starts from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Preset {
+    /// ByteTrack-style two-stage association on a constant-velocity filter (our best).
+    #[default]
+    Default,
+    /// The reference SORT tracker (abewley/sort), exactly.
+    Sort,
+}
+
+/// All tracker settings (`[tracker]`). See the module docs of [`crate::track`] for the mapping onto
+/// the paper's Table 1. Deserialised over its preset: keys not given keep the preset's values.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "Patch")]
 pub struct TrackerConfig {
+    /// The base the other keys override: `default` or `sort`.
+    pub preset: Preset,
     /// Association algorithm.
     pub mode: Mode,
     /// `T_d`: detections scoring below this are ignored.
@@ -27,7 +42,7 @@ pub struct TrackerConfig {
     /// `T_unt`: minimum score of an unmatched ("untracked") detection to start a new track.
     pub new_track_thresh: f64,
     /// `T_iou`: minimum IoU between a predicted track box and a detection in the first stage.
-    pub iou_thresh: f64,
+    pub iou_threshold: f64,
     /// Minimum IoU in the second (low-score) stage.
     pub low_iou_thresh: f64,
     /// `T_unc`: minimum IoU to extend an unconfirmed (tentative) track.
@@ -35,7 +50,7 @@ pub struct TrackerConfig {
     /// Hits needed to confirm a track (SORT: consecutive hits, `min_hits`).
     pub min_hits: u32,
     /// Byte mode: how long a lost track is kept for recovery, seconds.
-    pub max_lost_s: f64,
+    pub max_age_s: f64,
     /// Sort mode: SORT's `max_age`, in frames (updates).
     pub max_age_frames: u32,
     /// Byte mode: multiply IoU by the detection score in the first-stage cost (ByteTrack's fusion).
@@ -58,15 +73,16 @@ impl TrackerConfig {
     /// Exact SORT: `max_age = 1`, `min_hits = 3`, `iou_threshold = 0.3`, no score threshold.
     pub fn sort() -> Self {
         Self {
+            preset: Preset::Sort,
             mode: Mode::Sort,
             det_thresh: f64::NEG_INFINITY,
             track_thresh: f64::NEG_INFINITY,
             new_track_thresh: f64::NEG_INFINITY,
-            iou_thresh: 0.3,
+            iou_threshold: 0.3,
             low_iou_thresh: 0.3,
             unconfirmed_iou_thresh: 0.3,
             min_hits: 3,
-            max_lost_s: 0.0,
+            max_age_s: 0.0,
             max_age_frames: 1,
             fuse_score: false,
             depth_weight: 0.0,
@@ -80,15 +96,16 @@ impl TrackerConfig {
     /// Our best settings (found with `fme tune` and on mot15; see the README).
     pub fn default_preset() -> Self {
         Self {
+            preset: Preset::Default,
             mode: Mode::Byte,
             det_thresh: 0.1,
             track_thresh: 0.5,
             new_track_thresh: 0.8,
-            iou_thresh: 0.2,
+            iou_threshold: 0.2,
             low_iou_thresh: 0.5,
             unconfirmed_iou_thresh: 0.3,
             min_hits: 2,
-            max_lost_s: 1.0,
+            max_age_s: 1.0,
             max_age_frames: 30,
             fuse_score: false,
             depth_weight: 0.0,
@@ -99,27 +116,12 @@ impl TrackerConfig {
         }
     }
 
-    /// A preset by name (`sort` or `default`).
-    pub fn preset(name: &str) -> Option<Self> {
-        match name {
-            "sort" => Some(Self::sort()),
-            "default" => Some(Self::default_preset()),
-            _ => None,
+    /// The settings of a preset.
+    pub fn preset(preset: Preset) -> Self {
+        match preset {
+            Preset::Sort => Self::sort(),
+            Preset::Default => Self::default_preset(),
         }
-    }
-
-    /// Applies a TOML document: keys at the top level or in a `[track]` table; `preset = "..."`
-    /// picks the base, the other keys override it. Unknown keys are an error that names them.
-    pub fn from_toml(text: &str, base: Self) -> Result<Self, ConfigError> {
-        let value: toml::Table = toml::from_str(text).map_err(|e| ConfigError::Toml(e.to_string()))?;
-        let table = match value.get("track") {
-            Some(toml::Value::Table(t)) => t.clone(),
-            Some(_) => return Err(ConfigError::Key("track".into(), "must be a table".into())),
-            None => value,
-        };
-        let patch: Patch =
-            toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| ConfigError::Toml(e.to_string()))?;
-        patch.apply(base)
     }
 
     /// Checks ranges; returns the first offending key.
@@ -131,17 +133,14 @@ impl TrackerConfig {
                 Err(ConfigError::Key(k.into(), format!("{v} is not in [0, 1]")))
             }
         };
-        unit("iou_thresh", self.iou_thresh)?;
+        unit("iou_threshold", self.iou_threshold)?;
         unit("low_iou_thresh", self.low_iou_thresh)?;
         unit("unconfirmed_iou_thresh", self.unconfirmed_iou_thresh)?;
         if self.det_thresh.is_nan() || self.track_thresh.is_nan() || self.new_track_thresh.is_nan() {
             return Err(ConfigError::Key("det_thresh".into(), "score thresholds must not be NaN".into()));
         }
-        if !(self.max_lost_s >= 0.0 && self.max_lost_s.is_finite()) {
-            return Err(ConfigError::Key(
-                "max_lost_s".into(),
-                format!("{} is not a finite time >= 0", self.max_lost_s),
-            ));
+        if !(self.max_age_s >= 0.0 && self.max_age_s.is_finite()) {
+            return Err(ConfigError::Key("max_age_s".into(), format!("{} is not a finite time >= 0", self.max_age_s)));
         }
         if !(self.depth_weight >= 0.0 && self.depth_weight.is_finite()) {
             return Err(ConfigError::Key("depth_weight".into(), format!("{} is not >= 0", self.depth_weight)));
@@ -174,21 +173,26 @@ pub enum ConfigError {
     Key(String, String),
 }
 
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        Self::default_preset()
+    }
+}
+
+/// What a `[tracker]` section may set: a preset and any key over it.
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Patch {
-    preset: Option<String>,
+    preset: Option<Preset>,
     mode: Option<Mode>,
     det_thresh: Option<f64>,
     track_thresh: Option<f64>,
     new_track_thresh: Option<f64>,
-    #[serde(alias = "iou_threshold")]
-    iou_thresh: Option<f64>,
+    iou_threshold: Option<f64>,
     low_iou_thresh: Option<f64>,
     unconfirmed_iou_thresh: Option<f64>,
     min_hits: Option<u32>,
-    #[serde(alias = "max_age_s")]
-    max_lost_s: Option<f64>,
+    max_age_s: Option<f64>,
     max_age_frames: Option<u32>,
     fuse_score: Option<bool>,
     depth_weight: Option<f64>,
@@ -198,28 +202,21 @@ struct Patch {
     max_tracks: Option<usize>,
 }
 
+impl TryFrom<Patch> for TrackerConfig {
+    type Error = ConfigError;
+    fn try_from(p: Patch) -> Result<Self, ConfigError> {
+        p.apply()
+    }
+}
+
 impl Patch {
-    fn apply(self, base: TrackerConfig) -> Result<TrackerConfig, ConfigError> {
-        let mut c = match &self.preset {
-            Some(p) => TrackerConfig::preset(p)
-                .ok_or_else(|| ConfigError::Key("preset".into(), format!("unknown preset `{p}` (sort, default)")))?,
-            None => base,
-        };
+    fn apply(self) -> Result<TrackerConfig, ConfigError> {
+        let mut c = TrackerConfig::preset(self.preset.unwrap_or_default());
         macro_rules! set {
             ($($k:ident),*) => { $( if let Some(v) = self.$k { c.$k = v; } )* };
         }
-        set!(mode, det_thresh, track_thresh, new_track_thresh, iou_thresh, low_iou_thresh, unconfirmed_iou_thresh);
-        set!(
-            min_hits,
-            max_lost_s,
-            max_age_frames,
-            fuse_score,
-            depth_weight,
-            buffer_rate,
-            buffer_max,
-            noise,
-            max_tracks
-        );
+        set!(mode, det_thresh, track_thresh, new_track_thresh, iou_threshold, low_iou_thresh, unconfirmed_iou_thresh);
+        set!(min_hits, max_age_s, max_age_frames, fuse_score, depth_weight, buffer_rate, buffer_max, noise, max_tracks);
         c.validate()?;
         Ok(c)
     }
@@ -229,24 +226,29 @@ impl Patch {
 mod tests {
     use super::*;
 
+    fn parse(text: &str) -> Result<TrackerConfig, String> {
+        toml::from_str::<TrackerConfig>(text).map_err(|e| e.to_string())
+    }
+
     #[test]
-    fn toml_overrides_and_rejects_unknown_keys() {
-        let c =
-            TrackerConfig::from_toml("[track]\npreset = \"sort\"\niou_thresh = 0.5\n", TrackerConfig::default_preset())
-                .expect("valid");
-        assert_eq!(c.mode, Mode::Sort);
-        assert_eq!(c.iou_thresh, 0.5);
-        let e = TrackerConfig::from_toml("iou_tresh = 0.5", TrackerConfig::sort()).expect_err("typo");
-        assert!(e.to_string().contains("iou_tresh"), "{e}");
-        // The daemon's `[tracker]` names are accepted as aliases.
-        let c = TrackerConfig::from_toml(
-            "[track]\niou_threshold = 0.4\nmax_age_s = 2.0\nmax_tracks = 64\n",
-            TrackerConfig::default_preset(),
-        )
-        .expect("aliases");
-        assert_eq!((c.iou_thresh, c.max_lost_s, c.max_tracks), (0.4, 2.0, 64));
-        assert!(TrackerConfig::from_toml("max_tracks = 129", TrackerConfig::sort()).is_err());
-        let e = TrackerConfig::from_toml("iou_thresh = 1.5", TrackerConfig::sort()).expect_err("range");
-        assert!(e.to_string().contains("iou_thresh"), "{e}");
+    fn keys_override_the_preset_and_unknown_keys_are_rejected() {
+        let c = parse("preset = \"sort\"\niou_threshold = 0.5\n").expect("valid");
+        assert_eq!((c.preset, c.mode, c.iou_threshold, c.min_hits), (Preset::Sort, Mode::Sort, 0.5, 3));
+        let e = parse("iou_tresh = 0.5").expect_err("typo");
+        assert!(e.contains("iou_tresh"), "{e}");
+        let c = parse("iou_threshold = 0.4\nmax_age_s = 2.0\nmax_tracks = 64\n").expect("keys");
+        assert_eq!((c.preset, c.iou_threshold, c.max_age_s, c.max_tracks), (Preset::Default, 0.4, 2.0, 64));
+        assert!(parse("max_tracks = 129").is_err());
+        let e = parse("iou_threshold = 1.5").expect_err("range");
+        assert!(e.contains("iou_threshold"), "{e}");
+        assert!(parse("preset = \"bytetrack\"").is_err(), "presets are an enum");
+    }
+
+    #[test]
+    fn serialised_config_reads_back_identical() {
+        for c in [TrackerConfig::sort(), TrackerConfig::default_preset()] {
+            let text = toml::to_string(&c).expect("serialise");
+            assert_eq!(parse(&text), Ok(c), "{text}");
+        }
     }
 }

@@ -30,7 +30,7 @@
 //!   frame), three association stages (confirmed and lost tracks with high-score detections; tracked
 //!   tracks with low-score detections, since occluded fish score low; tentative tracks with the
 //!   remaining high-score detections), confirmation after `min_hits` hits, lost tracks kept for
-//!   `max_lost_s` seconds and recovered, optional depth term in the cost (`depth_weight`).
+//!   `max_age_s` seconds and recovered, optional depth term in the cost (`depth_weight`).
 //!
 //! # The paper's Table 1 as configuration keys
 //! | paper | symbol | key | meaning here |
@@ -39,7 +39,7 @@
 //! | Tracking Thres | `T_t` | `track_thresh` | high/low score split of the two-stage association |
 //! | Untracked Thres | `T_unt` | `new_track_thresh` | minimum score of an unmatched detection to start a track |
 //! | Unconfirmed Thres | `T_unc` | `unconfirmed_iou_thresh` | minimum IoU to extend a tentative track |
-//! | IoU Thres | `T_iou` | `iou_thresh` | minimum IoU in the first stage |
+//! | IoU Thres | `T_iou` | `iou_threshold` | minimum IoU in the first stage |
 //! | Kernel Size `k`, Fusion Thres `T_f` | | - | HRNet heat-map settings of the detector, not tracker ones |
 //!
 //! The paper's chosen values for its Faster R-CNN tracker (Table 2: `T_d` 50%, `T_t` 50%, `T_unt`
@@ -50,5 +50,5 @@ pub mod kalman;
 mod tracker;
 pub mod tune;
 
-pub use config::{ConfigError, Mode, TrackerConfig};
+pub use config::{ConfigError, Mode, Preset, TrackerConfig};
 pub use tracker::{Detection, MAX_DETS, MAX_TRACKS, TrackError, TrackOutput, Tracker, TrackerStats};

@@ -19,7 +19,7 @@ enum TrackState {
     Tentative,
     /// Confirmed and matched recently.
     Confirmed,
-    /// Confirmed but unmatched in the last update; kept for `max_lost_s` to be recovered.
+    /// Confirmed but unmatched in the last update; kept for `max_age_s` to be recovered.
     Lost,
 }
 
@@ -361,7 +361,7 @@ impl Tracker {
     /// SORT's `Sort.update` after prediction.
     fn update_sort(&mut self, t: f64) {
         let (nd, nt) = (self.dets.len(), self.tracks.len());
-        let thr = self.cfg.iou_thresh;
+        let thr = self.cfg.iou_threshold;
         // IoU matrix, detections as rows (SORT's orientation).
         for i in 0..nd {
             for j in 0..nt {
@@ -596,7 +596,7 @@ impl Tracker {
         self.trk_used[..nt].fill(false);
         let hi = c.track_thresh;
         // 1: confirmed and lost tracks with high-score detections.
-        self.stage(t, c.iou_thresh, c.fuse_score, false, |tr| tr.state != TrackState::Tentative, |d| d.score >= hi);
+        self.stage(t, c.iou_threshold, c.fuse_score, false, |tr| tr.state != TrackState::Tentative, |d| d.score >= hi);
         // 2: still-tracked tracks with low-score detections (occluded fish score low).
         self.stage(t, c.low_iou_thresh, false, false, |tr| tr.state == TrackState::Confirmed, |d| d.score < hi);
         // 3: tentative tracks with the remaining high-score detections.
@@ -616,7 +616,7 @@ impl Tracker {
                 continue;
             }
             let tr = &mut self.tracks[j];
-            let expired = t - tr.t_last > c.max_lost_s + 1e-9;
+            let expired = t - tr.t_last > c.max_age_s + 1e-9;
             if tr.state == TrackState::Tentative || expired {
                 self.tracks.remove(j);
             } else {

@@ -198,11 +198,11 @@ pub const GRID_KEYS: &[&str] = &[
     "det_thresh",
     "track_thresh",
     "new_track_thresh",
-    "iou_thresh",
+    "iou_threshold",
     "low_iou_thresh",
     "unconfirmed_iou_thresh",
     "min_hits",
-    "max_lost_s",
+    "max_age_s",
     "max_age_frames",
     "depth_weight",
     "buffer_rate",
@@ -215,11 +215,11 @@ pub fn set_key(cfg: &mut TrackerConfig, key: &str, v: f64) -> Result<(), String>
         "det_thresh" => cfg.det_thresh = v,
         "track_thresh" => cfg.track_thresh = v,
         "new_track_thresh" => cfg.new_track_thresh = v,
-        "iou_thresh" => cfg.iou_thresh = v,
+        "iou_threshold" => cfg.iou_threshold = v,
         "low_iou_thresh" => cfg.low_iou_thresh = v,
         "unconfirmed_iou_thresh" => cfg.unconfirmed_iou_thresh = v,
         "min_hits" => cfg.min_hits = v.max(0.0).round() as u32,
-        "max_lost_s" => cfg.max_lost_s = v,
+        "max_age_s" => cfg.max_age_s = v,
         "max_age_frames" => cfg.max_age_frames = v.max(0.0).round() as u32,
         "depth_weight" => cfg.depth_weight = v,
         "buffer_rate" => cfg.buffer_rate = v,
@@ -240,7 +240,7 @@ impl Grid {
     /// The paper's Table 1 on our keys: `T_d`, `T_t`, `T_unt`, `T_unc`, `T_iou` in 30%..70%.
     pub fn paper() -> Self {
         let v = vec![0.3, 0.4, 0.5, 0.6, 0.7];
-        let axes = ["det_thresh", "track_thresh", "new_track_thresh", "unconfirmed_iou_thresh", "iou_thresh"]
+        let axes = ["det_thresh", "track_thresh", "new_track_thresh", "unconfirmed_iou_thresh", "iou_threshold"]
             .iter()
             .map(|k| (k.to_string(), v.clone()))
             .collect();
@@ -349,7 +349,7 @@ mod tests {
 
     #[test]
     fn grid_points_cover_the_product() {
-        let g = Grid::from_toml("iou_thresh = [0.3, 0.5]\nmin_hits = [1, 2, 3]\n").expect("valid");
+        let g = Grid::from_toml("iou_threshold = [0.3, 0.5]\nmin_hits = [1, 2, 3]\n").expect("valid");
         assert_eq!(g.len(), 6);
         let pts: std::collections::BTreeSet<String> =
             (0..6).map(|i| format!("{:?}", g.point(i, TrackerConfig::default_preset()).1)).collect();

@@ -1,6 +1,7 @@
 //! The camera calibration the daemon needs for metric depth (paper eq. 1-2): intrinsics, the
 //! world-to-camera pose and the reference objects, read from a `meta.json`-format file.
 
+use crate::config::Config;
 use crate::geometry::{Camera, Pose, WorldPoint};
 use crate::sequence::{CameraMeta, ReferenceObject};
 use crate::units::Metres;
@@ -29,6 +30,20 @@ pub struct Calibration {
 }
 
 impl Calibration {
+    /// The calibration a configuration asks for: `camera.calibration` when set, else a recorded
+    /// source's own `meta.json`, else none (a camera without calibration runs uncalibrated).
+    pub fn for_config(cfg: &Config) -> Result<Option<Self>, String> {
+        let configured = &cfg.camera.calibration;
+        if !configured.as_os_str().is_empty() {
+            return Self::load(configured).map(Some).map_err(|e| format!("camera.calibration: {e}"));
+        }
+        let meta = cfg.source.path.join("meta.json");
+        if cfg.source.path.starts_with("/dev") || !meta.is_file() {
+            return Ok(None);
+        }
+        Self::load(&meta).map(Some).map_err(|e| format!("the recording's calibration: {e}"))
+    }
+
     /// Reads and checks a calibration file; the error names the file and the problem.
     pub fn load(path: &Path) -> Result<Self, String> {
         let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;

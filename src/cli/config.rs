@@ -1,0 +1,45 @@
+//! `fme config`: check a configuration file, or show the effective configuration.
+
+use super::ConfigArgs;
+use std::path::PathBuf;
+
+/// Arguments of `fme config`.
+#[derive(Debug, clap::Args)]
+pub struct ConfigCmdArgs {
+    /// What to do.
+    #[command(subcommand)]
+    pub action: Action,
+}
+
+/// `fme config` actions.
+#[derive(Debug, clap::Subcommand)]
+pub enum Action {
+    /// Validate a file: exit 0, or 2 with a message naming the file, the line and the key.
+    Check {
+        /// The configuration file.
+        file: PathBuf,
+    },
+    /// Print the effective configuration as TOML: the defaults, the file (if given) and the `--set`s.
+    Show {
+        /// The configuration file (default: the built-in defaults).
+        file: Option<PathBuf>,
+        /// Override one key: `--set section.key=value` (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+    },
+}
+
+/// Runs `fme config`.
+pub fn run(args: ConfigCmdArgs) -> anyhow::Result<()> {
+    match args.action {
+        Action::Check { file } => {
+            let c = ConfigArgs { config: Some(file.clone()), set: Vec::new() };
+            c.load(&[])?;
+            super::write_stdout(&format!("{}: ok\n", file.display()))
+        }
+        Action::Show { file, set } => {
+            let (cfg, _) = ConfigArgs { config: file, set }.load(&[])?;
+            super::write_stdout(&cfg.to_toml())
+        }
+    }
+}

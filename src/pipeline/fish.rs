@@ -1,0 +1,444 @@
+//! The fish pipeline: detector + tracker + depth network + metric fit + post-processing + motion
+//! (paper eq. 1-5), on one thread, with all per-frame state owned here and reused.
+//!
+//! Per frame at time `t` (the frame's own timestamp, never an assumed period):
+//! 1. `tracker.predict(t)`: every frame, so tracks move between detector runs;
+//! 2. the schedule says whether this frame gets the detector (`detector.rate_hz`) and/or the depth
+//!    network (`depth.rate_hz`); only then is the frame decoded to RGB;
+//! 3. detections -> `tracker.update(t)`; depth map -> relative values at the reference objects'
+//!    pixels -> metric fit (eq. 1-2), kept until the next depth run;
+//! 4. the confirmed tracks' boxes -> [`ActivityEstimator`] (eq. 3-4 corrections, world positions from
+//!    the corrected centre and the metric depth sampled there, per-fish speed, swarm mean eq. 5).
+//!
+//! A [`Substitute`] may replace the detector, detector + tracker, or the depth network with ground
+//! truth (`fme eval`); everything else, schedule included, runs as in `fme run`.
+
+use super::rate::RateMeter;
+use super::substitute::{DepthView, Substitute};
+use super::{ActivitySample, CalibInfo, Calibration, Frame, Pipeline, PipelineError, QualityFlags, StageHealth};
+use crate::config::Config;
+use crate::geometry::{Camera, PixelBox};
+use crate::infer::{self, DepthNet, Detector, FramePlan, InferSchedule, RgbFrame};
+use crate::metric::{DepthFit, MapKind, ROBUST_INLIER, ReferenceFootprints, ReferencePoints, sample_fish};
+use crate::motion::{ActivityEstimator, SwarmEstimate, TrackObservation, TrackView};
+use crate::track::{self, Tracker};
+use crate::units::{Metres, MetresPerSecond};
+
+/// Counts of the metric fits (eq. 1-2) since the start, for scoring and the console.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FitStats {
+    /// Successful fits.
+    pub fits: u64,
+    /// Failed fits (the previous one was kept).
+    pub failures: u64,
+    /// Sum of the successful scale/shift fits' RMS residuals at the references, m.
+    pub residual_sum_m: f64,
+    /// Scale/shift fits with a residual (the regressors have none).
+    pub residuals: u64,
+    /// References rejected as outliers by the robust fit, summed over fits.
+    pub rejected: u64,
+}
+
+/// Detector + tracker + depth + metric fit + post-processing + motion.
+pub struct FishPipeline {
+    cfg: Config,
+    schedule: InferSchedule,
+    detector: Option<Detector>,
+    depth: Option<DepthNet>,
+    substitute: Option<Box<dyn Substitute>>,
+    tracker: Tracker,
+    estimator: ActivityEstimator,
+    refs: ReferencePoints,
+    footprints: ReferenceFootprints,
+    fit: Option<DepthFit>,
+    fit_stats: FitStats,
+    calib: CalibInfo,
+    rgb: Vec<u8>,
+    dets: Vec<track::Detection>,
+    given: Vec<(u32, PixelBox)>,
+    obs: Vec<TrackObservation>,
+    ran: FramePlan,
+    estimate: SwarmEstimate,
+    last_t: Option<f64>,
+    health: StageHealth,
+    det_rate: RateMeter,
+    depth_rate: RateMeter,
+}
+
+impl std::fmt::Debug for FishPipeline {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FishPipeline")
+            .field("detector", &self.detector)
+            .field("depth", &self.depth)
+            .field("substitute", &self.substitute.is_some())
+            .field("references", &self.refs.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl FishPipeline {
+    /// The pipeline of `fme run`. `calibration`: the camera and reference objects (`None`:
+    /// uncalibrated; fish are tracked but no speed is reported). Errors name the config key and the
+    /// file (missing ONNX Runtime, missing or mismatched model).
+    pub fn new(cfg: &Config, calibration: Option<Calibration>) -> Result<Self, String> {
+        Self::build(cfg, calibration, None)
+    }
+
+    /// The same pipeline with stages replaced by `substitute` (`fme eval`); networks it replaces
+    /// are not loaded.
+    pub fn with_substitute(
+        cfg: &Config,
+        calibration: Option<Calibration>,
+        substitute: Box<dyn Substitute>,
+    ) -> Result<Self, String> {
+        Self::build(cfg, calibration, Some(substitute))
+    }
+
+    fn build(cfg: &Config, calibration: Option<Calibration>, sub: Option<Box<dyn Substitute>>) -> Result<Self, String> {
+        cfg.detector.validate().map_err(|e| e.to_string())?;
+        cfg.depth.validate().map_err(|e| e.to_string())?;
+        cfg.tracker.validate().map_err(|e| format!("tracker: {e}"))?;
+        cfg.motion.validate().map_err(str::to_string)?;
+        cfg.postprocess.validate().map_err(str::to_string)?;
+        let needs_detector = !sub.as_ref().is_some_and(|s| s.replaces_tracks() || s.replaces_detector());
+        let needs_depth = !sub.as_ref().is_some_and(|s| s.replaces_depth());
+        if needs_detector || needs_depth {
+            infer::runtime::environment().map_err(|e| format!("ONNX Runtime: {e}"))?;
+        }
+        let detector = if needs_detector {
+            let c = infer::DetectorConfig {
+                model: infer::runtime::resolve_model(&cfg.detector.model),
+                ..cfg.detector.clone()
+            };
+            Some(Detector::open(&c, c.session()).map_err(|e| format!("detector.model: {e}"))?)
+        } else {
+            None
+        };
+        let depth = if needs_depth {
+            let c = infer::DepthConfig { model: infer::runtime::resolve_model(&cfg.depth.model), ..cfg.depth.clone() };
+            Some(DepthNet::open(&c, c.session()).map_err(|e| format!("depth.model: {e}"))?)
+        } else {
+            None
+        };
+        let camera = calibration.as_ref().map_or_else(|| fallback_camera(cfg), |c| c.camera);
+        // References are kept if they fall inside the calibrated image (principal point at its centre);
+        // sampling outside the actual frame returns nothing anyway.
+        let (w, h) = ((2.0 * camera.intrinsics.cx).ceil() as u32, (2.0 * camera.intrinsics.cy).ceil() as u32);
+        let refs = calibration
+            .as_ref()
+            .map(|c| ReferencePoints::project(&camera, c.references.iter().copied(), w, h))
+            .unwrap_or_default();
+        let footprints = match (&calibration, cfg.detector.ignore_references) {
+            (Some(c), true) => ReferenceFootprints::project(&camera, c.cubes.iter().copied()),
+            _ => ReferenceFootprints::default(),
+        };
+        Ok(Self {
+            schedule: InferSchedule::new(cfg.detector.rate_hz, cfg.depth.rate_hz),
+            detector,
+            depth,
+            substitute: sub,
+            tracker: Tracker::new(cfg.tracker),
+            estimator: ActivityEstimator::new(camera, cfg.motion, cfg.postprocess),
+            calib: CalibInfo { references_visible: refs.len() as u32, ..CalibInfo::default() },
+            refs,
+            footprints,
+            fit: None,
+            fit_stats: FitStats::default(),
+            rgb: Vec::with_capacity(cfg.source.width as usize * cfg.source.height as usize * 3),
+            dets: Vec::with_capacity(track::MAX_DETS),
+            given: Vec::with_capacity(track::MAX_TRACKS),
+            obs: Vec::with_capacity(track::MAX_TRACKS),
+            ran: FramePlan::default(),
+            estimate: SwarmEstimate::default(),
+            last_t: None,
+            health: StageHealth::default(),
+            det_rate: RateMeter::default(),
+            depth_rate: RateMeter::default(),
+            cfg: cfg.clone(),
+        })
+    }
+
+    /// What ran on the last frame (detector, depth).
+    pub fn ran(&self) -> FramePlan {
+        self.ran
+    }
+
+    /// The detections of the last detector run (after dropping those on the reference cubes).
+    pub fn detections(&self) -> &[track::Detection] {
+        &self.dets
+    }
+
+    /// The tracked boxes that entered the estimator on the last frame.
+    pub fn observations(&self) -> &[TrackObservation] {
+        &self.obs
+    }
+
+    /// The estimator's result on the last frame (corrections, latency, ...).
+    pub fn estimate(&self) -> &SwarmEstimate {
+        &self.estimate
+    }
+
+    /// The estimator's tracks after the last frame.
+    pub fn tracks(&self) -> impl Iterator<Item = TrackView> + '_ {
+        self.estimator.tracks()
+    }
+
+    /// Counts of the metric fits so far.
+    pub fn fit_stats(&self) -> FitStats {
+        self.fit_stats
+    }
+
+    /// The reference objects inside the image.
+    pub fn references_in_view(&self) -> usize {
+        self.refs.len()
+    }
+
+    /// The depth map the pipeline samples now: the network's last map, or the substitute's.
+    fn depth_view(&self) -> Option<&dyn DepthView> {
+        match (&self.depth, &self.substitute) {
+            (Some(net), _) => net.last_map().map(|m| m as &dyn DepthView),
+            (None, Some(s)) => s.depth(),
+            (None, None) => None,
+        }
+    }
+
+    /// Starts over after time went backwards (camera restarted): tracks, speeds and schedules are
+    /// reset; the metric fit is kept (the camera has not moved).
+    fn restart(&mut self) {
+        self.tracker = Tracker::new(self.cfg.tracker);
+        self.estimator = ActivityEstimator::new(*self.estimator.camera(), self.cfg.motion, self.cfg.postprocess);
+        self.schedule = InferSchedule::new(self.cfg.detector.rate_hz, self.cfg.depth.rate_hz);
+    }
+
+    /// Refits on the current depth map (eq. 1-2); a failed fit keeps the previous one. Metric maps
+    /// (ground-truth depth) need no fit.
+    fn refit(&mut self) {
+        let Some(view) = self.depth_view() else { return };
+        if view.kind() == MapKind::Depth || self.refs.is_empty() {
+            return;
+        }
+        let refs = self.refs.pairs(|px| view.point(px));
+        self.calib.references_visible = refs.len() as u32;
+        match self.cfg.depth.fit.fit(&refs, ROBUST_INLIER) {
+            Ok(f) => {
+                self.fit_stats.fits += 1;
+                let (scale, shift, residual) = match f.scale_shift() {
+                    Some(ss) => {
+                        self.fit_stats.residual_sum_m += ss.residual_rms.0;
+                        self.fit_stats.residuals += 1;
+                        self.fit_stats.rejected += u64::from(ss.rejected.count_ones());
+                        (ss.s, ss.t, ss.residual_rms.0)
+                    }
+                    None => (f64::NAN, f64::NAN, f64::NAN),
+                };
+                self.fit = Some(f);
+                self.calib = CalibInfo {
+                    scale,
+                    shift,
+                    residual_m: residual,
+                    references_visible: refs.len() as u32,
+                    calibrated: true,
+                };
+            }
+            Err(e) => {
+                self.fit_stats.failures += 1;
+                tracing::debug!("metric fit failed ({e}); keeping the previous fit");
+            }
+        }
+    }
+
+    /// Runs the detector, or takes the substitute's detections, and updates the tracker.
+    fn detect(&mut self, frame: &Frame, rgb: Option<&RgbFrame<'_>>) -> Result<(), PipelineError> {
+        let t = frame.timestamp;
+        self.dets.clear();
+        match (&mut self.detector, rgb) {
+            (Some(det), Some(rgb)) => match det.detect(rgb, t) {
+                Ok(d) => {
+                    let footprints = &self.footprints;
+                    self.dets.extend(
+                        d.items
+                            .iter()
+                            .filter(|x| !footprints.covers(&x.bbox))
+                            .map(|x| track::Detection::new(x.bbox, x.score)),
+                    );
+                }
+                Err(e) => {
+                    self.health.detector_ok = false;
+                    return Err(PipelineError::Stage { stage: "detector", message: e.to_string() });
+                }
+            },
+            _ => {
+                if let Some(s) = self.substitute.as_mut() {
+                    s.detections(frame, &mut self.dets)
+                        .map_err(|message| PipelineError::Stage { stage: "detections", message })?;
+                }
+            }
+        }
+        self.health.detector_ok = true;
+        self.det_rate.record(t.0);
+        self.tracker
+            .update(t, &self.dets)
+            .map_err(|e| PipelineError::Stage { stage: "tracker", message: e.to_string() })?;
+        Ok(())
+    }
+
+    /// Runs the depth network, or loads the substitute's map, then refits.
+    fn depth_frame(&mut self, frame: &Frame, rgb: Option<&RgbFrame<'_>>) -> Result<(), PipelineError> {
+        match (&mut self.depth, rgb) {
+            (Some(net), Some(rgb)) => {
+                if let Err(e) = net.estimate(rgb, frame.timestamp) {
+                    self.health.depth_ok = false;
+                    return Err(PipelineError::Stage { stage: "depth", message: e.to_string() });
+                }
+            }
+            _ => {
+                if let Some(s) = self.substitute.as_mut() {
+                    s.load_depth(frame).map_err(|message| PipelineError::Stage { stage: "depth", message })?;
+                }
+            }
+        }
+        self.health.depth_ok = true;
+        self.depth_rate.record(frame.timestamp.0);
+        self.refit();
+        Ok(())
+    }
+}
+
+/// A camera for an uncalibrated box (no speeds are reported without a fit, so only the image size
+/// matters): 90 degrees horizontal field of view, identity pose.
+fn fallback_camera(cfg: &Config) -> Camera {
+    let (w, h) = (cfg.source.width.max(1), cfg.source.height.max(1));
+    let intrinsics = crate::geometry::Intrinsics::from_hfov(w, h, 90.0).unwrap_or(crate::geometry::Intrinsics {
+        fx: 1.0,
+        fy: 1.0,
+        cx: 0.0,
+        cy: 0.0,
+        distortion: [0.0; 5],
+    });
+    Camera { intrinsics, pose: crate::geometry::Pose::identity() }
+}
+
+impl Pipeline for FishPipeline {
+    fn process(&mut self, frame: &Frame) -> Result<Option<ActivitySample>, PipelineError> {
+        let t = frame.timestamp;
+        if !t.0.is_finite() {
+            return Err(PipelineError::Decode { seq: frame.seq, message: format!("timestamp {} is not finite", t.0) });
+        }
+        if self.last_t.is_some_and(|last| t.0 <= last) {
+            tracing::warn!(t = t.0, "frame time went backwards (camera restart?): tracks reset");
+            self.restart();
+        }
+        self.last_t = Some(t.0);
+        let plan = self.schedule.plan(t);
+        self.ran = plan;
+        let tracks_given = self.substitute.as_ref().is_some_and(|s| s.replaces_tracks());
+        if !tracks_given {
+            self.tracker.predict(t).map_err(|e| PipelineError::Stage { stage: "tracker", message: e.to_string() })?;
+        }
+        // Decode only when a network runs on this frame.
+        let net_runs = (plan.detect && self.detector.is_some()) || (plan.depth && self.depth.is_some());
+        let mut rgb_buf = std::mem::take(&mut self.rgb);
+        let result = (|| {
+            let rgb = if net_runs {
+                let (w, h) = frame
+                    .to_rgb_into(&mut rgb_buf)
+                    .map_err(|message| PipelineError::Decode { seq: frame.seq, message })?;
+                Some(
+                    RgbFrame::new(w, h, &rgb_buf)
+                        .map_err(|e| PipelineError::Decode { seq: frame.seq, message: e.to_string() })?,
+                )
+            } else {
+                None
+            };
+            if plan.detect && !tracks_given {
+                self.detect(frame, rgb.as_ref())?;
+            }
+            if plan.depth {
+                self.depth_frame(frame, rgb.as_ref())?;
+            }
+            Ok::<(), PipelineError>(())
+        })();
+        self.rgb = rgb_buf;
+        result?;
+        self.obs.clear();
+        if tracks_given {
+            if let Some(s) = self.substitute.as_mut() {
+                self.given.clear();
+                s.tracks(frame, &mut self.given)
+                    .map_err(|message| PipelineError::Stage { stage: "tracks", message })?;
+                self.obs.extend(self.given.iter().map(|&(id, bbox)| TrackObservation { id, bbox, depth: None }));
+            }
+        } else {
+            self.obs.extend(self.tracker.confirmed().map(|o| TrackObservation { id: o.id, bbox: o.bbox, depth: None }));
+        }
+        self.health.tracks = self.obs.len() as u32;
+        self.health.detector_hz = self.det_rate.hz();
+        self.health.depth_hz = self.depth_rate.hz();
+        let view = match (&self.depth, &self.substitute) {
+            (Some(net), _) => net.last_map().map(|m| m as &dyn DepthView),
+            (None, Some(s)) => s.depth(),
+            (None, None) => None,
+        };
+        let (fit, how, obs) = (self.fit.as_ref(), self.cfg.depth.sample, &self.obs);
+        let s = self.estimator.update_with(t, obs, |o, px| {
+            let view = view?;
+            let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
+            let others = obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox);
+            let r = sample_fish(how, view.kind(), &b, others, || view.point(px), |p| view.grid(p))?;
+            match view.kind() {
+                MapKind::Depth => Some(Metres(r)),
+                MapKind::InverseDepth => fit?.depth(r),
+            }
+        });
+        self.estimate = s;
+        let metric = self.fit.is_some() || view.is_some_and(|v| v.kind() == MapKind::Depth);
+        let mean = s.mean.map_or(f64::NAN, |m| m.0);
+        let ci95_half = s.ci95.map_or(f64::NAN, |(lo, hi)| 0.5 * (hi.0 - lo.0));
+        let bls = match self.cfg.motion.body_length() {
+            Some(l) => mean / l.0,
+            None => s.mean_bls.unwrap_or(f64::NAN),
+        };
+        Ok(Some(ActivitySample {
+            timestamp: t,
+            mean: MetresPerSecond(mean),
+            mean_body_lengths: bls,
+            smoothed: MetresPerSecond(s.smoothed.map_or(f64::NAN, |m| m.0)),
+            ci95_half: MetresPerSecond(ci95_half),
+            fish: s.n_fish as u32,
+            latency: s.latency,
+            flags: QualityFlags {
+                too_few_fish: (s.n_fish as u32) < self.cfg.motion.min_fish,
+                depth_uncalibrated: !metric,
+                stale: false,
+            },
+        }))
+    }
+
+    fn health(&self) -> StageHealth {
+        self.health
+    }
+
+    fn calib(&self) -> CalibInfo {
+        self.calib
+    }
+
+    fn describe_tracks(&self, out: &mut dyn std::fmt::Write, max: usize) -> std::fmt::Result {
+        for v in self.estimator.tracks().take(max) {
+            let c = v.bbox.center();
+            write!(
+                out,
+                "id {:>4} t {:.2} s box ({:.0},{:.0}) {:.0}x{:.0} px",
+                v.id, v.last_seen.0, c.u, c.v, v.bbox.w, v.bbox.h
+            )?;
+            match v.depth {
+                Some(d) => write!(out, " depth {:.2} m", d.0)?,
+                None => write!(out, " depth -")?,
+            }
+            match v.speed {
+                Some(s) => writeln!(out, " speed {:.3} m/s", s.0)?,
+                None => writeln!(out, " speed -")?,
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,128 @@
+//! The pipeline: frames in, activity samples out (paper eq. 1-5), one implementation for every
+//! command.
+//!
+//! [`FishPipeline`] is the chain `fme run` ships: detector and depth network at reduced rates on
+//! frame time, tracker, metric fit on the reference objects (eq. 1-2), post-processing (eq. 3-4) and
+//! motion (eq. 5). `fme eval` drives the same type over a recording, with ground truth swapped in
+//! for a stage where asked ([`Substitute`]) and scoring taps on its outputs, so what it scores is
+//! what the PLC receives. The daemon (capture, queues, outputs, console, watchdog) only knows the
+//! [`Pipeline`] trait.
+//!
+//! Errors from a stage are returned as [`PipelineError::Stage`] (the service counts and logs them and
+//! keeps going; a panic inside `process` is caught and counted the same way).
+
+mod calibration;
+mod fish;
+mod frame;
+mod rate;
+mod series;
+mod substitute;
+
+pub use calibration::Calibration;
+pub use fish::{FishPipeline, FitStats};
+pub use frame::{Frame, PixelFormat};
+pub use series::{SeriesRow, SeriesWriter};
+pub use substitute::{DepthView, Substitute};
+
+use crate::units::{MetresPerSecond, Seconds};
+
+/// Quality flags of an activity sample (mirrored in the status register bits 3, 4 and 6).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct QualityFlags {
+    /// Fewer tracked fish than `motion.min_fish`.
+    pub too_few_fish: bool,
+    /// No metric depth fit yet (reference objects not seen): speeds are in uncalibrated units.
+    pub depth_uncalibrated: bool,
+    /// The value is older than `output.stale_after_s` (set by the service, not the pipeline).
+    pub stale: bool,
+}
+
+/// One activity sample (paper eq. 5: mean over tracked fish of each fish's 3D speed at a frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ActivitySample {
+    /// Timestamp of the frame the sample belongs to (camera clock).
+    pub timestamp: Seconds,
+    /// Swarm mean speed (eq. 5), m/s.
+    pub mean: MetresPerSecond,
+    /// Swarm mean speed in body lengths per second.
+    pub mean_body_lengths: f64,
+    /// Smoothed activity (EWMA over `motion.smoothing_s`), m/s.
+    pub smoothed: MetresPerSecond,
+    /// Half-width of the 95% interval of the mean, m/s.
+    pub ci95_half: MetresPerSecond,
+    /// Number of fish in the mean.
+    pub fish: u32,
+    /// How far back the mean refers to (a speed over a span is the speed at its middle), s.
+    pub latency: Seconds,
+    /// Quality flags.
+    pub flags: QualityFlags,
+}
+
+/// Health of the pipeline stages, published in the status register and the console.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StageHealth {
+    /// The detector ran successfully on its last scheduled frame.
+    pub detector_ok: bool,
+    /// The depth network ran successfully on its last scheduled frame.
+    pub depth_ok: bool,
+    /// Detector runs per second achieved.
+    pub detector_hz: f64,
+    /// Depth runs per second achieved.
+    pub depth_hz: f64,
+    /// Tracks currently confirmed.
+    pub tracks: u32,
+}
+
+/// Metric depth calibration state (paper eq. 1-2), shown by the console `calib` command.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CalibInfo {
+    /// Fitted scale s.
+    pub scale: f64,
+    /// Fitted shift t.
+    pub shift: f64,
+    /// RMS residual of the fit on the reference objects, m.
+    pub residual_m: f64,
+    /// Reference objects visible in the last depth frame.
+    pub references_visible: u32,
+    /// Whether a fit is available.
+    pub calibrated: bool,
+}
+
+/// A pipeline: owns all per-frame state; called on the pipeline thread only.
+pub trait Pipeline: Send {
+    /// Processes one frame. Returns a sample when one is due (the pipeline decides its own detection
+    /// and depth schedule from frame timestamps; the service rate-limits what reaches the outputs).
+    /// An `Err` is a bad frame or a stage failure: the service logs it, raises a status bit and goes on.
+    fn process(&mut self, frame: &Frame) -> Result<Option<ActivitySample>, PipelineError>;
+    /// Current stage health.
+    fn health(&self) -> StageHealth;
+    /// Current calibration.
+    fn calib(&self) -> CalibInfo {
+        CalibInfo::default()
+    }
+    /// Writes one line per confirmed track (console `tracks`), at most `max` lines.
+    fn describe_tracks(&self, _out: &mut dyn std::fmt::Write, _max: usize) -> std::fmt::Result {
+        Ok(())
+    }
+}
+
+/// A per-frame pipeline failure.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// The frame could not be decoded.
+    #[error("frame {seq}: cannot decode: {message}")]
+    Decode {
+        /// Frame sequence number.
+        seq: u64,
+        /// Decoder message.
+        message: String,
+    },
+    /// A stage (detector, depth, ...) failed.
+    #[error("{stage}: {message}")]
+    Stage {
+        /// Stage name.
+        stage: &'static str,
+        /// What went wrong.
+        message: String,
+    },
+}
