@@ -32,7 +32,7 @@ lint: setup
 # the recording's ground truth. No camera, no PLC needed.
 demo: build
 	$(MAKE) --no-print-directory demo-run
-	$(BIN) eval --sequence $(DEMO_SEQ) --boxes model --depth model --fit robust
+	$(BIN) eval --sequence $(DEMO_SEQ) --boxes model --depth model
 
 # Every benchmark (speed is measured here, never in tests). mot15 parity needs ../shared beside the repo.
 bench: bench-synth bench-core bench-track bench-infer bench-daemon
@@ -43,7 +43,7 @@ bench-synth: setup
 bench-core:
 	$(CARGO) bench --locked --bench core
 # `fme run` on a recording (default: the bundled one) with a Modbus TCP server on 127.0.0.1:5020 and a
-# live one-line view; stops after DEMO_FRAMES frames (real time: 15 s). Read it with mbpoll (see README).
+# live one-line view; stops after DEMO_FRAMES frames (real time: 15 s). Read it with mbpoll (docs/plc-integration.md).
 DEMO_SEQ ?= tests/data/swarm20
 DEMO_FRAMES ?= 450
 demo-run: build

@@ -17,12 +17,13 @@ SYNTH_FME=${SYNTH_FME:-$FME}   # a binary with `fme synth` (branch synth until m
 [ -x "$FME" ] || cargo build --release --locked --bin fme
 mkdir -p "$OUT"
 synth() { local out=$1; shift; [ -f "$out/seqinfo.ini" ] || [ -d "$out" -a "$2" = postproc-suite ] || "$SYNTH_FME" synth --out "$out" --force "$@" >/dev/null; }
-# The README's tables were measured before the heading method (motion.along_ray = "heading", README
-# "Speed from the heading") and before fish entered the mean at an age (motion.min_age, README "Young
+# The tables in docs/accuracy.md were measured before the heading method (motion.along_ray = "heading", docs/lab-notes/
+# 2026-12-activity-index.md "Speed from the heading") and before fish entered the mean at an age (motion.min_age, lab notes "Young
 # tracks out of the mean"); ALONG_RAY=heading MIN_AGE=1 runs today's defaults instead.
 ALONG_RAY=${ALONG_RAY:-depth}
 MIN_AGE=${MIN_AGE:-0}
-ev() { # --paper keeps its own min_age 0
+ev() { # --paper keeps its own min_age 0. Every frame: these ablations score the estimator, not the schedule.
+  set -- --every-frame "$@"
   local a=(--along-ray "$ALONG_RAY")
   [[ " $* " == *" --paper "* ]] || a+=(--min-age "$MIN_AGE")
   "$FME" eval --json "${a[@]}" "$@"
@@ -42,16 +43,22 @@ echo "== evaluating" >&2
 R="$OUT/results"; mkdir -p "$R"
 synth "$OUT/swarm21" --preset swarm --fish 20 --frames "$FRAMES" --seed 21 --layout F   # held out
 for scene in swarm swarm21 single; do
-  ev --sequence "$OUT/$scene" --paper --plot "$OUT/$scene-paper.png" > "$R/A-$scene-paper.json"
-  ev --sequence "$OUT/$scene" "${TUNED[@]}" --plot "$OUT/$scene-fme.png" --series "$OUT/$scene-fme.csv" > "$R/A-$scene-fme.json"
-  ev --sequence "$OUT/$scene" --box-fluctuation > "$R/A-$scene-eq3on.json"
-  ev --sequence "$OUT/$scene" --speed-span 0.5 > "$R/A-$scene-span05.json"
-  ev --sequence "$OUT/$scene" --speed-method regression > "$R/A-$scene-regr.json"
+  # Each setting also with post-processing off ("raw").
+  for off in "" "--no-postprocess"; do
+    x=${off:+-raw}
+    ev --sequence "$OUT/$scene" --paper $off --plot "$OUT/$scene-paper$x.png" > "$R/A-$scene-paper$x.json"
+    ev --sequence "$OUT/$scene" "${TUNED[@]}" $off --series "$OUT/$scene-fme$x.csv" > "$R/A-$scene-fme$x.json"
+    ev --sequence "$OUT/$scene" --box-fluctuation $off > "$R/A-$scene-eq3on$x.json"
+    ev --sequence "$OUT/$scene" --speed-span 0.5 $off > "$R/A-$scene-span05$x.json"
+    ev --sequence "$OUT/$scene" --speed-method regression $off > "$R/A-$scene-regr$x.json"
+  done
 done
 for d in "$OUT"/postproc/*/; do
   n=$(basename "$d")
   ev --sequence "$d" --paper > "$R/postproc-paper-$n.json"
+  ev --sequence "$d" --paper --no-postprocess > "$R/postproc-paper-$n-raw.json"
   ev --sequence "$d" "${TUNED[@]}" > "$R/postproc-fme-$n.json"
+  ev --sequence "$d" "${TUNED[@]}" --no-postprocess > "$R/postproc-fme-$n-raw.json"
 done
 for fit in linear inverse robust poly2 tree knn; do
   ev --sequence "$OUT/swarm" "${TUNED[@]}" --depth relative-gt --fit "$fit" > "$R/fit-$fit.json"
@@ -77,9 +84,9 @@ settings = [("paper", "paper: frame to frame, eq. 3+4"), ("eq3on", "chord 1 s, e
             ("span05", "chord 0.5 s, eq. 4"), ("fme", "fme default: chord 1 s, eq. 4"), ("regr", "regression 1 s, eq. 4")]
 for scene in ["swarm", "swarm21", "single"]:
     for key, label in settings:
-        j = load(f"A-{scene}-{key}")
+        j, raw = load(f"A-{scene}-{key}"), load(f"A-{scene}-{key}-raw")
         row([scene, label, j["frames"], f'{j["mean_fish"]:.1f}', f'{j["speed_rmse_mps"]:.4f}', f'{j["speed_distcorr"]:.3f}',
-             f'{j["speed_rmse_raw_mps"]:.4f}', f'{j["speed_distcorr_raw"]:.3f}',
+             f'{raw["speed_rmse_mps"]:.4f}', f'{raw["speed_distcorr"]:.3f}',
              f'[{j["error_ci95_mps"][0]:.3f}, {j["error_ci95_mps"][1]:.3f}]'])
 print("\n## Post-processing on/off, postproc-suite (GT boxes + GT depth)\n")
 row(["scene", "paper: on (eq. 3+4)", "paper: off", "fme: on (eq. 4)", "fme: off", "eq. 3 fixes", "eq. 4 fixes"])
@@ -87,7 +94,11 @@ row(["---"] * 7)
 tot = {}
 for p in sorted(glob.glob(os.path.join(R, "postproc-paper-*.json"))):
     n = os.path.basename(p)[len("postproc-paper-"):-5]
+    if n.endswith("-raw"):
+        continue
     a, b = load("postproc-paper-" + n), load("postproc-fme-" + n)
+    a["speed_rmse_raw_mps"] = load("postproc-paper-" + n + "-raw")["speed_rmse_mps"]
+    b["speed_rmse_raw_mps"] = load("postproc-fme-" + n + "-raw")["speed_rmse_mps"]
     k = "occluded" if ("occ" in n.lower() and "no-occ" not in n.lower() and "noocc" not in n.lower() and "clear" not in n.lower()) else "not occluded"
     t = tot.setdefault(k, [0.0, 0.0, 0.0, 0.0, 0])
     for i, v in enumerate([a["speed_rmse_mps"], a["speed_rmse_raw_mps"], b["speed_rmse_mps"], b["speed_rmse_raw_mps"]]):

@@ -51,9 +51,9 @@ def series_cases(paths):
         x, y = [], []
         with open(p) as f:
             for row in csv.DictReader(f):
-                if row["true_mps"] and row["est_mps"]:
+                if row["true_mps"] and row["activity_mps"]:
                     x.append(float(row["true_mps"]))
-                    y.append(float(row["est_mps"]))
+                    y.append(float(row["activity_mps"]))
         yield os.path.basename(p), np.array(x), np.array(y)
 
 

@@ -19,7 +19,7 @@ B=${SEED_BASE:-7021}
 [ -x "$FME" ] || cargo build --release --locked --bin fme
 mkdir -p "$OUT/results-$B"
 synth() { local out=$1; shift; [ -f "$out/seqinfo.ini" ] || "$FME" synth --out "$out" --force "$@" >/dev/null; }
-# Seeds 7001-7012 chose the first depth smoothing and box sampling; set 7021 their current values (README).
+# Seeds 7001-7012 chose the first depth smoothing and box sampling; set 7021 their current values (docs/lab-notes/2026-12-depth.md).
 synth "$OUT/single-s$B" --preset single --frames "$FRAMES" --seed "$B" --layout F --water 3C
 synth "$OUT/single-s$((B + 1))" --preset single --frames "$FRAMES" --seed "$((B + 1))" --layout F --water I
 synth "$OUT/swarm20-s$((B + 10))" --preset swarm --fish 20 --frames "$FRAMES" --seed "$((B + 10))" --layout F --water 3C
@@ -29,9 +29,9 @@ for seq in "single-s$B" "single-s$((B + 1))" "swarm20-s$((B + 10))" "swarm40-s$(
   for g in A B C D; do
     case $g in
       A) args=(--boxes gt --depth gt) ;;
-      B) args=(--boxes gt --depth model --fit robust) ;;
+      B) args=(--boxes gt --depth model) ;;
       C) args=(--boxes model --depth gt) ;;
-      D) args=(--boxes model --depth model --fit robust) ;;
+      D) args=(--boxes model --depth model) ;;
     esac
     # shellcheck disable=SC2086 # EVAL_ARGS is a list of options
     "$FME" eval --json --sequence "$OUT/$seq" "${args[@]}" ${EVAL_ARGS:-} --plot "$OUT/$seq-$g.png" 2>/dev/null > "$OUT/results-$B/$seq-$g.json"

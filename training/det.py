@@ -30,7 +30,7 @@ def conv(cin, cout, s=1, k=3, relu=True):
 def sep_conv(cin, cout, relu=True):
     """A depthwise-separable 3x3 convolution (MobileNet): depthwise 3x3, then pointwise 1x1, each with
     its BatchNorm. In int8 ONNX Runtime runs the two in a third (stride 8) to a half (stride 4) of a
-    full 3x3 convolution's time at these widths (README "Depthwise-separable detector")."""
+    full 3x3 convolution's time at these widths (docs/lab-notes/2026-12-detector.md "Depthwise-separable detector")."""
     layers = [nn.Conv2d(cin, cin, 3, 1, 1, groups=cin, bias=False), nn.BatchNorm2d(cin), nn.ReLU(inplace=True),
               nn.Conv2d(cin, cout, 1, bias=False), nn.BatchNorm2d(cout)]
     return nn.Sequential(*layers, nn.ReLU(inplace=True)) if relu else nn.Sequential(*layers)
@@ -54,7 +54,7 @@ class Block(nn.Module):
 class FishDet(nn.Module):
     # sub=1 is the original stride-4 head; train.py (and so train.sh) defaults to sub=2.
     # s8_blocks and head_conv size the two most expensive parts of the int8 graph (ORT profile, 2 threads:
-    # each stride-8 3x3 convolution ~0.30 ms, each stride-4 one ~0.35 ms); see README "A slimmer detector".
+    # each stride-8 3x3 convolution ~0.30 ms, each stride-4 one ~0.35 ms); see docs/lab-notes/2026-12-detector.md "A slimmer detector".
     # sep names the parts (SEP_PARTS) whose stride-1 3x3 convolutions are depthwise-separable; the strided
     # ones stay full.
     def __init__(self, w=(16, 32, 64, 96, 128), fpn=64, head=32, sub=1, s8_blocks=2, head_conv=True, sep=()):
@@ -110,11 +110,11 @@ class FishDet(nn.Module):
 
 
 # Named layouts (train.py --det-arch): "full" is the bundled one; "slim" drops one stride-8 residual
-# block and the stride-4 head convolution (int8 -19% with random weights; README "A slimmer detector"),
+# block and the stride-4 head convolution (int8 -19% with random weights; docs/lab-notes/2026-12-detector.md "A slimmer detector"),
 # "no_head_conv" only the latter (-9%); "s8_48" runs stride 8 and the FPN at 48 channels (-17%; train.sh's
-# layout, README "Narrower at stride 8"), "lean" both that and no head convolution (-23%); "sep" makes every
+# layout, docs/lab-notes/2026-12-detector.md "Narrower at stride 8"), "lean" both that and no head convolution (-23%); "sep" makes every
 # stride-1 3x3 convolution depthwise-separable (-28% with 2 threads, -42% with 1), "sep48" only those at
-# strides 4 and 8 (-20%, -30%), "s8_48_sep4" s8_48 with those at stride 4 separable (-23%, -24%; README
+# strides 4 and 8 (-20%, -30%), "s8_48_sep4" s8_48 with those at stride 4 separable (-23%, -24%; docs/lab-notes/2026-12-detector.md
 # "Depthwise-separable detector").
 _S8_48 = {"w": (16, 32, 48, 96, 128), "fpn": 48}
 # The parts with stride-1 3x3 convolutions: backbone stages, FPN merges, head.

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Trains, exports, quantises and evaluates fme's bundled models (README.md, "What the bundled models achieve").
+"""Trains, exports, quantises and evaluates fme's bundled models (docs/training.md; figures in docs/accuracy.md).
 
     python train.py --data DATA_DIR --models ../models [--det-epochs N] [--depth-epochs N]
     python train.py --data DATA_DIR --requantize [--skip depth]   # re-quantise the fp32 files only

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # One command that re-trains fme's models from scratch in about an hour on a 2-core CPU (issue 5):
 #   bash training/train.sh            # or: make -C training all
-# (59 minutes on the AMD EPYC of README "Re-training in an hour" with the full detector layout, about 60
+# (59 minutes on the AMD EPYC of docs/training.md "The one-hour recipe" with the full detector layout, about 60
 # with s8_48, rendering included, venv present).
 # The bundled models/*.onnx came from the longer recipe `make -C training bundled` (whole frames,
 # BUDGET_S=2700, DEPTH_BUDGET_S=1800).
@@ -44,17 +44,17 @@ DET_EPOCHS=${DET_EPOCHS:-13}
 DET_SUB=${DET_SUB:-2}
 DEPTH_EPOCHS=${DEPTH_EPOCHS:-80}
 # Focus weight 1 -> 3 lowered depth at fish on all five of set 7021; 6 lowered it on 7 of 10 but made group D
-# worse on the seed set that chooses (0.0321 -> 0.0334 m/s) and on single fish, so 3 stays (README).
+# worse on the seed set that chooses (0.0321 -> 0.0334 m/s) and on single fish, so 3 stays (docs/lab-notes/2026-12-depth.md).
 DEPTH_FOCUS=${DEPTH_FOCUS:-3.0}
-# Random 320x192 crops ran a depth training step 3.8x faster (README "Depth network on crops"). With the
+# Random 320x192 crops ran a depth training step 3.8x faster (docs/lab-notes/2026-12-depth.md "Depth network on crops"). With the
 # bundled run's 1,800 s whole frames were as good; in the one-hour budget of 1,100 s they made only 12
 # epochs here, and depth at body (group B, 20 held-out sequences) was higher on 19 of 20, one single fish
 # at 0.298 m. Crops for the first 80% (19 crop epochs, then 3 on whole frames) were within 0.25 m on all
-# 20 and lower than the bundled network on 12 (README "Re-training in an hour"). DEPTH_CROP= (empty):
+# 20 and lower than the bundled network on 12 (docs/training.md "The one-hour recipe"). DEPTH_CROP= (empty):
 # whole frames throughout, as the bundled network.
 DEPTH_CROP=${DEPTH_CROP-320x192}
 DEPTH_CROP_UNTIL=${DEPTH_CROP_UNTIL:-0.8}
-# Detector windows (README "Detector on crops", "Re-training in an hour"): a 384x256 window ran a step
+# Detector windows (docs/lab-notes/2026-12-detector.md "Detector on crops", "Re-training in an hour"): a 384x256 window ran a step
 # 1.3-1.7x faster on the AMD machine; there 1,900 s made 12 epochs with held-out int8 P / R 0.955 / 0.953
 # at conf 0.4 (bundled, whole frames, 2,407 s on the AMX machine: 0.962 / 0.952; s8_48 on whole frames,
 # 2,570 s here: 0.950 / 0.950). DET_CROP= (empty) trains on whole frames, as the bundled detector did.
@@ -62,11 +62,11 @@ DET_CROP=${DET_CROP-384x256}
 # Detector layout: slim (one stride-8 block and the stride-4 head convolution less) ran 14-16% faster in fme
 # but lost held-out precision (and recall on whole frames); no_head_conv on 384x256 windows kept both but
 # tracks worse (its scores are less peaked) and, with young tracks out of the mean, measures speed no
-# better (README "A slimmer detector"); so does lean. s8_48 (48 channels at stride 8 and in the FPN) on
+# better (docs/lab-notes/2026-12-detector.md "A slimmer detector"); so does lean. s8_48 (48 channels at stride 8 and in the FPN) on
 # the windows above: the full layout's held-out P / R at conf 0.4, 11-17% faster in fme with 1 thread
-# (fme's default), 3-7% with 2 (README "Narrower at stride 8"). The depthwise-separable layouts (sep, sep48,
+# (fme's default), 3-7% with 2 (docs/lab-notes/2026-12-detector.md "Narrower at stride 8"). The depthwise-separable layouts (sep, sep48,
 # s8_48_sep4) are faster still but miss P / R 0.95 in the hour, trained longer or distilled from the
-# bundled detector (TRAIN_ARGS="--det-teacher FILE"; README "Depthwise-separable detector").
+# bundled detector (TRAIN_ARGS="--det-teacher FILE"; docs/lab-notes/2026-12-detector.md "Depthwise-separable detector").
 # The bundled detector is full.
 DET_ARCH=${DET_ARCH:-s8_48}
 DET_NET=${DET_NET:-480x288}

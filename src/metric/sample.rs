@@ -30,7 +30,7 @@ pub const MIN_VISIBLE_POINTS: usize = 15;
 /// shows behind one of the fish covering it. What is seen of such a fish is a sliver along the
 /// edge of the fish in front, where the depth network blurs the two (on the 60-fish swarm s7033,
 /// the 2,855 readings this leaves out were 0.68 m off the body centre). 30 was set on seed sets
-/// 7021 and 7041 (40 tried as well) and checked on sets 7061 and 7081 (README, "Fish behind fish").
+/// 7021 and 7041 (40 tried as well) and checked on sets 7061 and 7081 (docs/lab-notes/2026-12-depth.md, "Fish behind fish").
 pub const MIN_VISIBLE_POINTS_BEHIND: usize = 30;
 
 /// Fraction of a box (each side, about its centre) whose grid the box samplers read: the fish's

@@ -6,8 +6,8 @@
 //! speed across the line of sight (the angular speed of its box centre times its range: accurate)
 //! divided by the foreshortening `cos a`, which is the box's apparent length (its angular extent times
 //! the range) over the fish's own length. This replaces the change of the depth network's depth over
-//! the speed span, whose noise was the largest part of the activity index's error (README, "What
-//! limits the activity index" and "Speed from the heading"). Nearly end-on
+//! the speed span, whose noise was the largest part of the activity index's error
+//! (docs/lab-notes/2026-12-activity-index.md; current figures in docs/accuracy.md, ablations). Nearly end-on
 //! (below [`MIN_FORESHORTENING`]) the box no longer tells the angle, and the depth change decides
 //! ([`speed_from_heading`]).
 //!

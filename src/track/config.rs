@@ -93,7 +93,7 @@ impl TrackerConfig {
         }
     }
 
-    /// Our best settings (found with `fme tune` and on mot15; see the README).
+    /// Our best settings (found with `fme tune` and on mot15; docs/accuracy.md, "Tracking").
     pub fn default_preset() -> Self {
         Self {
             preset: Preset::Default,
