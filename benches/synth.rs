@@ -3,9 +3,9 @@
 //!
 //! Run: `cargo bench --bench synth` (or `make bench-synth`). Optional args: frames (default 150).
 
+use fme::rng::Rng;
 use fme::synth::motion::{self, Activity};
 use fme::synth::render::{FrameBuffers, Renderer};
-use fme::synth::rng::Rng;
 use fme::synth::scene::{self, Layout, Pond};
 use fme::synth::{Preset, SynthConfig, WaterType, generate};
 use std::time::Instant;

@@ -17,13 +17,19 @@
 //! | [`pipeline`] | the stages chained on frame time; what every command runs | eq. 1-5 |
 //! | [`eval`], [`mot`] | speed, depth and tracking metrics against ground truth | sec. 4.5 |
 //! | [`capture`], [`output`], [`console`], [`config`], [`service`] | the edge daemon | - |
+//!
+//! Shared low-level pieces with no stage of their own: [`assign`] (the optimal assignment solver of
+//! the tracker and the MOT metrics), [`detection`] (what the detector produces and the tracker
+//! consumes) and [`rng`] (the seeded generator of all synthetic data).
 
 #![warn(missing_docs)]
 
+pub mod assign;
 pub mod capture;
 pub mod cli;
 pub mod config;
 pub mod console;
+pub mod detection;
 pub mod eval;
 pub mod geometry;
 pub mod infer;
@@ -33,6 +39,7 @@ pub mod motion;
 pub mod output;
 pub mod pipeline;
 pub mod postprocess;
+pub mod rng;
 pub mod sequence;
 pub mod service;
 pub mod synth;

@@ -56,11 +56,11 @@ fn yolo11n_export_loads_and_decodes_like_ultralytics() {
         assert!(diff <= 2.5 / 255.0, "letterbox differs from Ultralytics by {diff}");
 
         let text = std::fs::read_to_string(dir().join(format!("yolo11n_{size}.dets.txt"))).unwrap();
-        let theirs: Vec<(PixelBox, f32, u16)> = text
+        let theirs: Vec<(PixelBox, f64, u16)> = text
             .lines()
             .map(|l| {
                 let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
-                (PixelBox::new(v[0], v[1], v[2], v[3]), v[4] as f32, v[5] as u16)
+                (PixelBox::new(v[0], v[1], v[2], v[3]), v[4], v[5] as u16)
             })
             // fme drops boxes that clipping leaves empty; Ultralytics keeps them.
             .filter(|(b, _, _)| b.w > 0.5 && b.h > 0.5)

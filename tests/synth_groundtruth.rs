@@ -1,11 +1,11 @@
 //! Ground truth written by `fme synth` is exact and self-consistent, checked against the geometry.
 
 use fme::geometry::{Pixel, WorldPoint};
+use fme::rng::Rng;
 use fme::sequence::Sequence;
 use fme::synth::fish::FishShape;
 use fme::synth::motion::{self, Activity};
 use fme::synth::render::{FrameBuffers, Renderer};
-use fme::synth::rng::Rng;
 use fme::synth::scene::{self, Layout, Pond};
 use fme::synth::{Preset, SynthConfig, WaterType, generate};
 use std::collections::BTreeMap;

@@ -1,6 +1,6 @@
 //! Optimal assignment against brute force on small random matrices.
 
-use fme::track::assign::{FixedAssigner, UNASSIGNED, assign_vec};
+use fme::assign::{FixedAssigner, UNASSIGNED, assign_vec};
 
 struct Lcg(u64);
 impl Lcg {

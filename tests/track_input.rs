@@ -124,7 +124,7 @@ fn bad_depths_are_dropped_not_fatal() {
             2 => Some(Metres(f64::INFINITY)),
             _ => Some(Metres(2.0)),
         };
-        let d = Detection { bbox: PixelBox::new(10.0 + k as f64, 10.0, 30.0, 20.0), score: 0.9, depth };
+        let d = Detection { depth, ..Detection::new(PixelBox::new(10.0 + k as f64, 10.0, 30.0, 20.0), 0.9) };
         let out = t.update(Seconds(k as f64 / 30.0), &[d]).expect("ok");
         if k >= 1 {
             assert_eq!(out.len(), 1, "frame {k}");

@@ -73,7 +73,7 @@ pub fn track_rows(cfg: TrackerConfig, dets: &mut [MotRow], fps: f64) -> anyhow::
         // Frames without detections still run (tracks age and get lost, as in SORT's loop).
         let t = Seconds(f64::from(frame - 1) / fps);
         let tracks = tracker.update(t, &frame_dets).with_context(|| format!("frame {frame}"))?;
-        out.extend(tracks.iter().map(|o| MotRow { frame, id: i64::from(o.id), bbox: o.bbox, score: o.score }));
+        out.extend(tracks.iter().map(|o| MotRow::new(frame, i64::from(o.id), o.bbox, o.score)));
         let Some(f) = frame.checked_add(1) else { break };
         frame = f;
     }
@@ -133,7 +133,7 @@ pub fn run(args: TrackArgs) -> anyhow::Result<()> {
             let f = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
             let mut w = std::io::BufWriter::new(f);
             for r in &rows {
-                io::write_row(&mut w, r.frame, r.id as u32, &r.bbox, r.score)
+                io::write_row(&mut w, r, io::RowLayout::Result)
                     .with_context(|| format!("writing {}", out.display()))?;
             }
             w.flush().with_context(|| format!("writing {}", out.display()))?;
@@ -141,7 +141,7 @@ pub fn run(args: TrackArgs) -> anyhow::Result<()> {
             // Neither a file nor a score asked for: the tracks go to stdout.
             let mut text = Vec::new();
             for r in &rows {
-                io::write_row(&mut text, r.frame, r.id as u32, &r.bbox, r.score)?;
+                io::write_row(&mut text, r, io::RowLayout::Result)?;
             }
             super::write_stdout(&String::from_utf8_lossy(&text))?;
         }

@@ -2,7 +2,8 @@
 
 use super::EvalError;
 use crate::geometry::PixelBox;
-use crate::sequence::{Sequence, read_mot};
+use crate::mot::io::{ReadOptions, read_file};
+use crate::sequence::Sequence;
 use std::path::{Path, PathBuf};
 
 /// Boxes indexed by frame, loaded up front.
@@ -32,7 +33,7 @@ impl IndexedBoxes {
     /// MOTChallenge tracks from a file (`frame,id,x,y,w,h,...`); rows with id -1 (untracked
     /// detections) are ignored; a frame beyond the sequence is an error naming the file.
     pub fn from_mot_file(path: &Path, frames: u32) -> Result<Self, EvalError> {
-        let rows = read_mot(path)?;
+        let rows = read_file(path, ReadOptions::default())?;
         let mut by_frame = vec![Vec::new(); frames as usize + 1];
         for r in rows {
             if r.frame > frames {
@@ -86,5 +87,31 @@ impl std::str::FromStr for BoxesChoice {
             "model" => Self::Model,
             other => Self::File(PathBuf::from(other)),
         })
+    }
+}
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `fme eval --boxes FILE` reads a comma-separated and a whitespace-separated file alike.
+    #[test]
+    fn box_files_may_be_comma_or_whitespace_separated() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let comma = dir.path().join("comma.txt");
+        let spaces = dir.path().join("spaces.txt");
+        std::fs::write(&comma, "1,3,10,20,30,40,1,-1,-1,-1\n2,3,11,20,30,40,1,-1,-1,-1\n2,-1,0,0,5,5,0.4\n")
+            .expect("write");
+        std::fs::write(&spaces, "1 3 10 20 30 40 1 -1 -1 -1\n2\t3\t11 20 30 40\n2 -1 0 0 5 5 0.4\n").expect("write");
+        let mut out = Vec::new();
+        for path in [&comma, &spaces] {
+            let p = IndexedBoxes::from_mot_file(path, 2).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            p.frame_boxes(2, &mut out);
+            assert_eq!(out, [(3, PixelBox::new(11.0, 20.0, 30.0, 40.0))], "{}", path.display());
+        }
+        std::fs::write(&spaces, "1 3 10 20 30 40\n2 3 11 x 30 40\n").expect("write");
+        let e = IndexedBoxes::from_mot_file(&spaces, 2).expect_err("bad row").to_string();
+        assert!(e.contains("spaces.txt:2:") && e.contains("y `x` is not a number"), "{e}");
+        let e = IndexedBoxes::from_mot_file(&comma, 1).expect_err("beyond").to_string();
+        assert!(e.contains("comma.txt") && e.contains("frame 2 is beyond"), "{e}");
     }
 }

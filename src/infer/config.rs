@@ -13,6 +13,9 @@ use crate::metric::{DepthSample, FitMethod};
 /// Most detections kept per frame (the tracker's fixed capacity).
 pub const MAX_DETECTIONS: usize = 256;
 
+/// Largest supported depth sampling radius (`depth.sample_radius`: a 7x7 window).
+pub const MAX_SAMPLE_RADIUS: u32 = 3;
+
 /// `[detector]`: the fish detector (Ultralytics YOLOv8/YOLO11 export convention).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -161,10 +164,10 @@ impl DepthConfig {
         if self.mean.iter().any(|m| !m.is_finite()) {
             return Err(InferError::Config { key: "depth.mean", reason: format!("{:?} must be finite", self.mean) });
         }
-        if self.sample_radius > super::depth::MAX_SAMPLE_RADIUS {
+        if self.sample_radius > MAX_SAMPLE_RADIUS {
             return Err(InferError::Config {
                 key: "depth.sample_radius",
-                reason: format!("{} exceeds {}", self.sample_radius, super::depth::MAX_SAMPLE_RADIUS),
+                reason: format!("{} exceeds {MAX_SAMPLE_RADIUS}", self.sample_radius),
             });
         }
         size("depth.input_size", self.input_size)

@@ -5,18 +5,7 @@
 //! `4..4+nc` the per-class scores (already sigmoided; no objectness, no NMS in the graph).
 
 use super::letterbox::Letterbox;
-use crate::geometry::PixelBox;
-
-/// One detected object in frame pixels.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Detection {
-    /// The box in frame pixels (MOTChallenge top-left, width, height).
-    pub bbox: PixelBox,
-    /// Class score in 0..1 (for YOLO heads: the sigmoided class probability).
-    pub score: f32,
-    /// Class index (0 for the one-class fish model).
-    pub class: u16,
-}
+pub use crate::detection::Detection;
 
 /// Decodes a `[4 + nc, n]` row-major head output (batch dimension stripped) into `out` (cleared
 /// first): one candidate per anchor whose best class score is at least `conf`, its box mapped back
@@ -47,7 +36,7 @@ pub fn decode_yolo(output: &[f32], nc: usize, n: usize, conf: f32, lb: &Letterbo
             continue;
         }
         let bbox = lb.to_frame_unclipped(cx[j], cy[j], w[j], h[j]);
-        out.push(Detection { bbox, score: best, class: class as u16 });
+        out.push(Detection { bbox, score: f64::from(best), class: class as u16, depth: None });
     }
 }
 
@@ -85,9 +74,10 @@ pub fn clip_to_frame(dets: &mut Vec<Detection>, lb: &Letterbox) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::PixelBox;
 
-    fn det(x: f64, score: f32, class: u16) -> Detection {
-        Detection { bbox: PixelBox::new(x, 0.0, 10.0, 10.0), score, class }
+    fn det(x: f64, score: f64, class: u16) -> Detection {
+        Detection { class, ..Detection::new(PixelBox::new(x, 0.0, 10.0, 10.0), score) }
     }
 
     #[test]
@@ -104,7 +94,7 @@ mod tests {
 
     #[test]
     fn nms_respects_limits() {
-        let mut d: Vec<_> = (0..10).map(|i| det(i as f64 * 20.0, i as f32 / 10.0, 0)).collect();
+        let mut d: Vec<_> = (0..10).map(|i| det(i as f64 * 20.0, i as f64 / 10.0, 0)).collect();
         nms(&mut d, 0.5, false, 5, 3);
         assert_eq!(d.iter().map(|d| d.score).collect::<Vec<_>>(), vec![0.9, 0.8, 0.7]);
     }

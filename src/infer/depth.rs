@@ -17,8 +17,7 @@ use super::runtime::{SessionOptions, float_tensor_shape, fmt_shape, open_session
 use crate::geometry::Pixel;
 use crate::units::Seconds;
 
-/// Largest supported sampling radius (a 7x7 window).
-pub const MAX_SAMPLE_RADIUS: u32 = 3;
+use super::config::MAX_SAMPLE_RADIUS;
 const MAX_WINDOW: usize = ((2 * MAX_SAMPLE_RADIUS + 1) * (2 * MAX_SAMPLE_RADIUS + 1)) as usize;
 
 /// A relative inverse-depth map at network resolution, with the frame size it was computed from

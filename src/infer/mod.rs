@@ -18,9 +18,9 @@ mod letterbox;
 pub mod runtime;
 mod scheduler;
 
-pub use config::{DepthConfig, DetectorConfig, MAX_DETECTIONS};
+pub use config::{DepthConfig, DetectorConfig, MAX_DETECTIONS, MAX_SAMPLE_RADIUS};
 pub use decode::{Detection, clip_to_frame, decode_yolo, nms};
-pub use depth::{DepthNet, MAX_SAMPLE_RADIUS, RelDepthMap};
+pub use depth::{DepthNet, RelDepthMap};
 pub use detector::{Detections, Detector};
 pub use error::InferError;
 pub use frame::{Normalize, RgbFrame};

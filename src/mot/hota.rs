@@ -6,8 +6,8 @@
 //! positives. `DetA = TP / (TP + FN + FP)`, `AssA` = mean over TPs of the pair's association IoU,
 //! `HOTA_alpha = sqrt(DetA AssA)`; reported values are means over the 19 alphas.
 
+use crate::assign::{UNASSIGNED, assign_vec};
 use crate::geometry::PixelBox;
-use crate::track::assign::{UNASSIGNED, assign_vec};
 use std::collections::HashMap;
 
 const EPS: f64 = f64::EPSILON;

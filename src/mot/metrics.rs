@@ -11,8 +11,8 @@
 //! to hypothesis ids that maximises the number of pairable frames (Ristani et al. 2016).
 
 use super::io::MotRow;
+use crate::assign::{UNASSIGNED, assign_vec};
 use crate::geometry::PixelBox;
-use crate::track::assign::{UNASSIGNED, assign_vec};
 use std::collections::HashMap;
 
 /// Default pairing threshold on `1 - IoU`.

@@ -259,7 +259,7 @@ impl FishPipeline {
                         d.items
                             .iter()
                             .filter(|x| !footprints.covers(&x.bbox))
-                            .map(|x| track::Detection::new(x.bbox, f64::from(x.score))),
+                            .map(|x| track::Detection::new(x.bbox, x.score)),
                     );
                 }
                 Err(e) => {

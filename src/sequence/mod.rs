@@ -11,8 +11,9 @@
 //! meta.json            camera (intrinsics + world_to_camera), water, reference objects, ...
 //! ```
 //!
-//! Detections and tracker results use the MOTChallenge text rows of [`MotRow`]. Every parser names
-//! the file and the 1-based line of a bad row ([`Error`]).
+//! `gt.txt`, detections and tracker results are MOTChallenge text rows, parsed and written by
+//! [`crate::mot::io`] (comma- or whitespace-separated). Every parser names the file and the 1-based
+//! line of a bad row ([`Error`]).
 
 mod depth;
 mod error;
@@ -27,8 +28,8 @@ pub use error::Error;
 pub use meta::{CameraMeta, GeneratorMeta, Meta, ReferenceObject, WaterMeta, WorldToCamera};
 pub use reader::Sequence;
 pub use rows::{
-    GtBox, MotRow, WORLD_HEADER, WorldRow, format_gt, format_mot, format_world, parse_gt, parse_mot, parse_world,
-    read_gt, read_mot, read_world, write_gt, write_mot, write_world,
+    GtBox, WORLD_HEADER, WorldRow, format_gt, format_world, parse_gt, parse_world, read_gt, read_world, write_gt,
+    write_world,
 };
 pub use seqinfo::SeqInfo;
 pub use writer::{SequenceWriter, StagedDir, encode_jpeg};

@@ -130,9 +130,4 @@ impl Sequence {
     pub fn gt_of_frame(&self, frame: u32) -> impl Iterator<Item = &GtBox> {
         self.gt.iter().filter(move |r| r.frame == frame)
     }
-
-    /// World rows of one frame.
-    pub fn world_of_frame(&self, frame: u32) -> impl Iterator<Item = &WorldRow> {
-        self.world.iter().filter(move |r| r.frame == frame)
-    }
 }

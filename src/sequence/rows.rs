@@ -1,7 +1,9 @@
-//! Per-frame text rows: `gt/gt.txt`, `gt/world.csv` and MOTChallenge detection/result files.
+//! Per-frame text rows: `gt/gt.txt` (MOTChallenge rows, read and written with [`crate::mot::io`],
+//! the one MOTChallenge parser) and `gt/world.csv`.
 
 use super::{Error, Result};
 use crate::geometry::{PixelBox, WorldPoint};
+use crate::mot::io::{MotRow, RowLayout, parse_line};
 use crate::units::Metres;
 use nalgebra::Vector3;
 use std::fmt::Write as _;
@@ -23,6 +25,13 @@ pub struct GtBox {
     pub visibility: f64,
 }
 
+impl GtBox {
+    /// The row written to `gt.txt`: consider flag 1, class 1, the visibility in column 9.
+    pub fn to_row(&self) -> MotRow {
+        MotRow { extra: [1.0, self.visibility, -1.0], ..MotRow::new(self.frame, i64::from(self.id), self.bbox, 1.0) }
+    }
+}
+
 /// One row of `gt/world.csv`: body centre and analytic velocity in the world frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WorldRow {
@@ -38,22 +47,6 @@ pub struct WorldRow {
     pub length: Metres,
     /// Same visibility as the fish's `gt.txt` row (0 when it is outside the image).
     pub visibility: f64,
-}
-
-/// A MOTChallenge detection or tracker-result row: `frame,id,x,y,w,h,conf,x3d,y3d,z3d`
-/// (`id` is -1 for detections; unused 3D fields are -1).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MotRow {
-    /// 1-based frame number.
-    pub frame: u32,
-    /// Track id, -1 for plain detections.
-    pub id: i64,
-    /// Box, pixels.
-    pub bbox: PixelBox,
-    /// Confidence (detections) or 1 (results).
-    pub conf: f64,
-    /// Optional 3D position (MOTChallenge `x, y, z`), -1 when unused.
-    pub world: [f64; 3],
 }
 
 fn fields(line: &str) -> Vec<&str> {
@@ -78,59 +71,28 @@ fn frame_no(path: &Path, line: usize, s: &str) -> Result<u32> {
     Ok(v as u32)
 }
 
-fn bbox(path: &Path, line: usize, f: &[&str]) -> Result<PixelBox> {
-    let b = PixelBox::new(
-        finite(path, line, "x", f[2])?,
-        finite(path, line, "y", f[3])?,
-        finite(path, line, "w", f[4])?,
-        finite(path, line, "h", f[5])?,
-    );
-    if b.w < 0.0 || b.h < 0.0 {
-        return Err(Error::parse(path, line, "negative box width or height"));
-    }
-    Ok(b)
-}
-
 /// Non-empty, non-comment lines with their 1-based numbers.
 fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
     text.lines().enumerate().map(|(i, l)| (i + 1, l.trim())).filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
 }
 
-/// Parses `gt.txt` text. Columns 7 and 8 (conf, class) must be numbers but are not kept; a missing or
-/// negative visibility (MOT15 writes -1 there) reads as 1.
+/// Parses `gt.txt` text with the MOTChallenge row parser ([`parse_line`]). Columns 7 and 8
+/// (consider flag, class) must be numbers but are not kept; ids start at 1; a missing or negative
+/// visibility (MOT15 writes -1 there) reads as 1.
 pub fn parse_gt(path: &Path, text: &str) -> Result<Vec<GtBox>> {
     let mut out = Vec::new();
-    for (line, l) in data_lines(text) {
-        let f = fields(l);
-        if f.len() < 6 {
-            return Err(Error::parse(
-                path,
-                line,
-                format!("expected at least 6 comma-separated columns, got {}", f.len()),
-            ));
+    for (k, l) in text.lines().enumerate() {
+        let line = k + 1;
+        let Some(r) = parse_line(l).map_err(|msg| Error::parse(path, line, msg))? else { continue };
+        if r.id < 1 || r.id > i64::from(u32::MAX) {
+            return Err(Error::parse(path, line, format!("id must be a positive integer, got {}", r.id)));
         }
-        let frame = frame_no(path, line, f[0])?;
-        let id_f = finite(path, line, "id", f[1])?;
-        if id_f < 1.0 || id_f.fract() != 0.0 {
-            return Err(Error::parse(path, line, format!("id must be a positive integer, got {:?}", f[1])));
+        let v = r.extra[1];
+        if v > 1.0 {
+            return Err(Error::parse(path, line, format!("visibility {v} is above 1")));
         }
-        let bbox = bbox(path, line, &f)?;
-        for (i, name) in [(6, "conf"), (7, "class")] {
-            if let Some(s) = f.get(i) {
-                finite(path, line, name, s)?;
-            }
-        }
-        let visibility = match f.get(8) {
-            Some(s) => {
-                let v = finite(path, line, "visibility", s)?;
-                if v > 1.0 {
-                    return Err(Error::parse(path, line, format!("visibility {v} is above 1")));
-                }
-                if v < 0.0 { 1.0 } else { v }
-            }
-            None => 1.0,
-        };
-        out.push(GtBox { frame, id: id_f as u32, bbox, visibility });
+        let visibility = if v < 0.0 { 1.0 } else { v };
+        out.push(GtBox { frame: r.frame, id: r.id as u32, bbox: r.bbox, visibility });
     }
     Ok(out)
 }
@@ -177,35 +139,6 @@ pub fn parse_world(path: &Path, text: &str) -> Result<Vec<WorldRow>> {
     Ok(out)
 }
 
-/// Parses MOTChallenge `det.txt` / result text: 6 to 10 columns, missing ones read as -1 (conf as 1).
-pub fn parse_mot(path: &Path, text: &str) -> Result<Vec<MotRow>> {
-    let mut out = Vec::new();
-    for (line, l) in data_lines(text) {
-        let f = fields(l);
-        if f.len() < 6 || f.len() > 10 {
-            return Err(Error::parse(path, line, format!("expected 6 to 10 comma-separated columns, got {}", f.len())));
-        }
-        let frame = frame_no(path, line, f[0])?;
-        let id_f = finite(path, line, "id", f[1])?;
-        if id_f.fract() != 0.0 || id_f < -1.0 {
-            return Err(Error::parse(path, line, format!("id must be -1 or a positive integer, got {:?}", f[1])));
-        }
-        let bbox = bbox(path, line, &f)?;
-        let conf = match f.get(6) {
-            Some(s) => finite(path, line, "conf", s)?,
-            None => 1.0,
-        };
-        let mut world = [-1.0; 3];
-        for (k, w) in world.iter_mut().enumerate() {
-            if let Some(s) = f.get(7 + k) {
-                *w = finite(path, line, ["x3d", "y3d", "z3d"][k], s)?;
-            }
-        }
-        out.push(MotRow { frame, id: id_f as i64, bbox, conf, world });
-    }
-    Ok(out)
-}
-
 fn read_text(path: &Path) -> Result<String> {
     std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
 }
@@ -218,17 +151,12 @@ pub fn read_gt(path: &Path) -> Result<Vec<GtBox>> {
 pub fn read_world(path: &Path) -> Result<Vec<WorldRow>> {
     parse_world(path, &read_text(path)?)
 }
-/// Reads a MOTChallenge detection or result file.
-pub fn read_mot(path: &Path) -> Result<Vec<MotRow>> {
-    parse_mot(path, &read_text(path)?)
-}
 
-/// Formats `gt.txt` rows (boxes to 1/100 pixel, visibility to 4 decimals).
+/// Formats `gt.txt` rows ([`RowLayout::GroundTruth`]: boxes to 1/100 pixel, visibility to 4 decimals).
 pub fn format_gt(rows: &[GtBox]) -> String {
     let mut s = String::with_capacity(rows.len() * 48);
     for r in rows {
-        let b = r.bbox;
-        let _ = writeln!(s, "{},{},{:.2},{:.2},{:.2},{:.2},1,1,{:.4}", r.frame, r.id, b.x, b.y, b.w, b.h, r.visibility);
+        let _ = writeln!(s, "{}", r.to_row().display(RowLayout::GroundTruth));
     }
     s
 }
@@ -250,21 +178,6 @@ pub fn format_world(rows: &[WorldRow]) -> String {
     s
 }
 
-/// Formats MOTChallenge rows: `frame,id,x,y,w,h,conf,x3d,y3d,z3d`.
-pub fn format_mot(rows: &[MotRow]) -> String {
-    let mut s = String::with_capacity(rows.len() * 56);
-    for r in rows {
-        let b = r.bbox;
-        let [x, y, z] = r.world;
-        let _ = writeln!(
-            s,
-            "{},{},{:.2},{:.2},{:.2},{:.2},{},{},{},{}",
-            r.frame, r.id, b.x, b.y, b.w, b.h, r.conf, x, y, z
-        );
-    }
-    s
-}
-
 fn write_text(path: &Path, text: &str) -> Result<()> {
     std::fs::write(path, text).map_err(|e| Error::io(path, e))
 }
@@ -276,10 +189,6 @@ pub fn write_gt(path: &Path, rows: &[GtBox]) -> Result<()> {
 /// Writes `world.csv`.
 pub fn write_world(path: &Path, rows: &[WorldRow]) -> Result<()> {
     write_text(path, &format_world(rows))
-}
-/// Writes a MOTChallenge detection or result file.
-pub fn write_mot(path: &Path, rows: &[MotRow]) -> Result<()> {
-    write_text(path, &format_mot(rows))
 }
 
 #[cfg(test)]
@@ -293,7 +202,7 @@ mod tests {
         assert_eq!(rows.len(), 2);
         assert_eq!(rows[1].bbox, PixelBox::new(11.0, 20.0, 30.0, 40.0));
         let err = parse_gt(p, "1,1,10,20,30,40,1,1,0.5\n2,1,x,20,30,40,1,1,1\n").unwrap_err().to_string();
-        assert!(err.starts_with("gt/gt.txt:2:") && err.contains("column x"), "{err}");
+        assert!(err.starts_with("gt/gt.txt:2:") && err.contains("x `x` is not a number"), "{err}");
         let err = parse_gt(p, "0,1,1,1,1,1\n").unwrap_err().to_string();
         assert!(err.contains(":1:") && err.contains("frame"), "{err}");
         // MOT15 ground truth writes -1 in column 9: visibility unknown reads as 1.
@@ -301,13 +210,16 @@ mod tests {
     }
 
     #[test]
-    fn mot_rows_round_trip_and_default_missing_columns() {
-        let p = Path::new("det.txt");
-        let rows = parse_mot(p, "1,-1,1.5,2,3,4,0.9\n2,7,1,2,3,4,1,-1,-1,-1\n").unwrap();
-        assert_eq!(rows[0].id, -1);
-        assert_eq!(rows[0].world, [-1.0; 3]);
-        assert_eq!(parse_mot(p, &format_mot(&rows)).unwrap(), rows);
-        assert!(parse_mot(p, "1,1,1,1\n").unwrap_err().to_string().contains("det.txt:1:"));
+    fn gt_accepts_whitespace_and_round_trips() {
+        let p = Path::new("gt/gt.txt");
+        let rows = parse_gt(p, "1 1 10 20 30 40 1 1 0.5\n2,1,11,20,30,40\n").unwrap();
+        assert_eq!(rows[0].visibility, 0.5);
+        assert_eq!(rows[1].visibility, 1.0);
+        assert_eq!(parse_gt(p, &format_gt(&rows)).unwrap(), rows);
+        assert_eq!(format_gt(&rows[..1]), "1,1,10.00,20.00,30.00,40.00,1,1,0.5000\n");
+        let err = parse_gt(p, "1,1,1,1,1,1\n1,-1,1,1,1,1\n").unwrap_err().to_string();
+        assert!(err.starts_with("gt/gt.txt:2:") && err.contains("id must be a positive integer"), "{err}");
+        assert!(parse_gt(p, "1,1,1,1,1,1,1,1,1.5\n").unwrap_err().to_string().contains("above 1"));
     }
 
     #[test]

@@ -3,7 +3,7 @@
 //! tip of the unbent fish, which moves on the smooth centre path; tail beat and head recoil never
 //! reach the position or velocity labels (research note sec. 3).
 
-use super::rng::Rng;
+use crate::rng::Rng;
 use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
 
 /// Peak tail angle, radians: the tail tip (0.28 L behind the pivot) then swings 0.1 L either side,

@@ -2,10 +2,10 @@
 
 use super::motion::{self, Activity, Motion};
 use super::render::{FrameBuffers, Renderer};
-use super::rng::Rng;
 use super::scene::{self, Layout, Pond};
 use super::water::WaterType;
 use super::{Error, MAX_FISH, MAX_FRAMES};
+use crate::rng::Rng;
 use crate::sequence::{
     CameraMeta, GeneratorMeta, GtBox, Meta, SeqInfo, SequenceWriter, StagedDir, WorldRow, encode_jpeg,
 };

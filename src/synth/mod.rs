@@ -11,14 +11,13 @@
 //! | [`render`] | ray caster, image formation, caustics, snow, noise; exact amodal boxes and depth |
 //! | [`mod@generate`] | runs a preset and writes the sequence(s) with [`crate::sequence`] |
 //!
-//! Same arguments, same bytes: all randomness comes from [`rng::Rng`] seeded by `--seed`, and frames
+//! Same arguments, same bytes: all randomness comes from [`crate::rng::Rng`] seeded by `--seed`, and frames
 //! rendered in parallel are written to their own files.
 
 pub mod fish;
 pub mod generate;
 pub mod motion;
 pub mod render;
-pub mod rng;
 pub mod scene;
 pub mod texture;
 pub mod water;

@@ -9,8 +9,8 @@
 //! - `postproc-suite`: the paper's 18 single-fish scenes (sec. 4.4), exact constant-acceleration paths.
 
 use super::fish::{FishBody, FishState, tail_beat_hz};
-use super::rng::Rng;
 use super::scene::Pond;
+use crate::rng::Rng;
 use nalgebra::Vector3;
 use std::f64::consts::{PI, TAU};
 

@@ -6,11 +6,11 @@
 //! found it, so the depth maps agree with the geometry to the millimetre rounding.
 
 use super::fish::{Ellipsoid, FishBody, FishShape, FishState, PART_BODY, Triangle};
-use super::rng::{Rng, mix};
 use super::scene::Pond;
 use super::texture::{Caustics, NOISE_TABLE, fbm, gaussian_table, value_noise};
 use super::water::WaterType;
 use crate::geometry::{Camera, Pixel, PixelBox};
+use crate::rng::{Rng, mix};
 use crate::sequence::{DepthMap, ReferenceObject};
 use nalgebra::{Matrix3, Vector3};
 

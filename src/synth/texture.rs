@@ -1,7 +1,7 @@
 //! Procedural textures: value noise for floor and walls, a tileable caustic pattern, and a table of
 //! Gaussian samples for sensor noise.
 
-use super::rng::{Rng, mix};
+use crate::rng::{Rng, mix};
 
 /// Smooth value noise in `[0, 1]` on the integer lattice, hashed with `seed`.
 pub fn value_noise(seed: u64, x: f64, y: f64) -> f64 {

@@ -45,11 +45,10 @@
 //! The paper's chosen values for its Faster R-CNN tracker (Table 2: `T_d` 50%, `T_t` 50%, `T_unt`
 //! 70%, `T_unc` 40%, `T_iou` 50%) are a point of the `fme tune` grid.
 
-pub mod assign;
 pub mod config;
 pub mod kalman;
 mod tracker;
 pub mod tune;
 
 pub use config::{ConfigError, Mode, Preset, TrackerConfig};
-pub use tracker::{Detection, MAX_DETS, MAX_TRACKS, TrackError, TrackOutput, TrackState, Tracker, TrackerStats};
+pub use tracker::{Detection, MAX_DETS, MAX_TRACKS, TrackError, TrackOutput, Tracker, TrackerStats};

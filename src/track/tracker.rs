@@ -1,8 +1,9 @@
 //! The multi-object tracker: fixed-capacity tracks, SORT and ByteTrack-style association.
 
-use super::assign::{FixedAssigner, UNASSIGNED};
 use super::config::{Mode, TrackerConfig};
 use super::kalman::{CvKalman, SortKalman};
+use crate::assign::{FixedAssigner, UNASSIGNED};
+pub use crate::detection::Detection;
 use crate::geometry::PixelBox;
 use crate::units::{Metres, Seconds};
 
@@ -11,27 +12,9 @@ pub const MAX_TRACKS: usize = 128;
 /// Most detections used per frame; beyond it the highest scores are kept and the rest counted.
 pub const MAX_DETS: usize = 256;
 
-/// One detection of a frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Detection {
-    /// Box in pixels.
-    pub bbox: PixelBox,
-    /// Detector confidence.
-    pub score: f64,
-    /// Metric depth of the box centre when known (optional association cue).
-    pub depth: Option<Metres>,
-}
-
-impl Detection {
-    /// A detection without depth.
-    pub const fn new(bbox: PixelBox, score: f64) -> Self {
-        Self { bbox, score, depth: None }
-    }
-}
-
-/// Life-cycle state of a track.
+/// Life-cycle state of a track (internal: [`Tracker::outputs`] reports confirmed tracks).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum TrackState {
+enum TrackState {
     /// Seen fewer than `min_hits` times; not reported.
     Tentative,
     /// Confirmed and matched recently.
@@ -223,12 +206,6 @@ impl Tracker {
                 ..*o
             })
         })
-    }
-
-    /// Predicted boxes of all confirmed and lost tracks at the last predicted time (for a daemon
-    /// that detects every k-th frame): `(id, box)`.
-    pub fn predictions(&self) -> impl Iterator<Item = (u32, PixelBox)> + '_ {
-        self.tracks.iter().filter(|t| t.state != TrackState::Tentative).map(|t| (t.id, t.bbox()))
     }
 
     fn check_time(&self, t: f64) -> Result<(), TrackError> {
