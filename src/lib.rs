@@ -16,7 +16,8 @@
 //! | [`motion`] | world positions, per-fish 3D speed, swarm mean (activity index) | sec. 3.3, eq. 5 |
 //! | [`pipeline`] | the stages chained on frame time; what every command runs | eq. 1-5 |
 //! | [`eval`], [`mot`] | speed, depth and tracking metrics against ground truth | sec. 4.5 |
-//! | [`capture`], [`output`], [`console`], [`config`], [`service`] | the edge daemon | - |
+//! | [`config`], [`status`] | the one configuration; health and fault codes shared by the edges | - |
+//! | [`capture`], [`output`], [`console`], [`service`] | the edge daemon | - |
 //!
 //! Shared low-level pieces with no stage of their own: [`assign`] (the optimal assignment solver of
 //! the tracker and the MOT metrics), [`detection`] (what the detector produces and the tracker
@@ -42,6 +43,7 @@ pub mod postprocess;
 pub mod rng;
 pub mod sequence;
 pub mod service;
+pub mod status;
 pub mod synth;
 pub mod track;
 pub mod units;

@@ -52,7 +52,7 @@ async fn stuck_pipeline_stops_watchdog_and_raises_fault() {
         Daemon::start(cfg, String::new(), src, Box::new(StuckAfter { ok_frames: 30, seen: 0 }), RunOptions::default())
             .await
             .expect("start");
-    let shared = daemon.shared().clone();
+    let bank = daemon.bank().clone();
     let mut pings: Vec<Instant> = Vec::new();
     let t0 = Instant::now();
     let mut buf = [0u8; 256];
@@ -68,10 +68,10 @@ async fn stuck_pipeline_stops_watchdog_and_raises_fault() {
     let late = pings.iter().filter(|p| p.duration_since(t0) > Duration::from_millis(1600)).count();
     assert!(early >= 3, "pings while healthy: {early}");
     assert_eq!(late, 0, "no pings while the pipeline is stuck");
-    let blk = shared.bank.block();
+    let blk = bank.block();
     assert_eq!(blk[11], FaultCode::PipelineStalled as u16, "fault 4 published while stuck: {blk:?}");
     let hb = blk[12];
     tokio::time::sleep(Duration::from_millis(300)).await;
-    assert_ne!(shared.bank.block()[12], hb, "heartbeat still advances: the PLC sees a live box with a fault");
+    assert_ne!(bank.block()[12], hb, "heartbeat still advances: the PLC sees a live box with a fault");
     daemon.shutdown().await;
 }

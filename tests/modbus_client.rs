@@ -105,12 +105,13 @@ async fn daemon_writes_block_to_plc_survives_plc_outages() {
     let pipeline = support::edge_pipeline(&cfg);
     let daemon = Daemon::start(cfg, String::new(), source, pipeline, RunOptions::default()).await.expect("start");
     let shared = daemon.shared().clone();
+    let bank = daemon.bank().clone();
 
     // PLC down: the daemon keeps running (heartbeat advances), the link bit is clear, fault 5.
-    wait_until("client failures", 5, || shared.bank.counters().client_failures >= 2).await;
-    let hb0 = shared.bank.block()[12];
+    wait_until("client failures", 5, || bank.counters().client_failures >= 2).await;
+    let hb0 = bank.block()[12];
     tokio::time::sleep(Duration::from_millis(300)).await;
-    let blk = shared.bank.block();
+    let blk = bank.block();
     assert_ne!(blk[12], hb0, "heartbeat advances while the PLC is down");
     assert_eq!(blk[10] & status::PLC_LINK_OK, 0);
     assert_eq!(blk[11], registers::FaultCode::PlcLink as u16);
@@ -123,15 +124,15 @@ async fn daemon_writes_block_to_plc_survives_plc_outages() {
     let hb1 = plc.regs(62, 1)[0];
     wait_until("more writes", 5, || plc.writes() >= 4).await;
     assert_ne!(plc.regs(62, 1)[0], hb1, "heartbeat at base+12 increments in the PLC");
-    assert_eq!(plc.regs(50 + 18, 2), shared.bank.block()[18..20].to_vec(), "version registers");
+    assert_eq!(plc.regs(50 + 18, 2), bank.block()[18..20].to_vec(), "version registers");
     assert_eq!(plc.regs(0, 50), vec![0; 50], "nothing written below the base address");
-    wait_until("link bit", 5, || shared.bank.block()[10] & status::PLC_LINK_OK != 0).await;
+    wait_until("link bit", 5, || bank.block()[10] & status::PLC_LINK_OK != 0).await;
 
     // PLC drops mid-run, then comes back on the same address: the daemon catches up.
     drop(stop);
     tokio::time::sleep(Duration::from_millis(100)).await;
-    let failures = shared.bank.counters().client_failures;
-    wait_until("failure noticed", 5, || shared.bank.counters().client_failures > failures).await;
+    let failures = bank.counters().client_failures;
+    wait_until("failure noticed", 5, || bank.counters().client_failures > failures).await;
     let plc2 = Plc::new();
     let _stop2 = serve_plc(plc2.clone(), plc_addr).await;
     wait_until("writes after reconnect", 5, || plc2.writes() >= 2).await;

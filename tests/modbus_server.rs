@@ -220,9 +220,9 @@ async fn daemon_rtu_server_role_and_missing_adapter() {
     let d = Daemon::start(cfg.clone(), String::new(), src, support::edge_pipeline(&cfg), RunOptions::default())
         .await
         .expect("start without the adapter");
-    let hb = d.shared().bank.block()[12];
+    let hb = d.bank().block()[12];
     tokio::time::sleep(Duration::from_millis(400)).await;
-    assert_ne!(d.shared().bank.block()[12], hb, "running without the RS-485 adapter");
+    assert_ne!(d.bank().block()[12], hb, "running without the RS-485 adapter");
     d.shutdown().await;
 
     // With a device (one end of a pty pair; the PLC is on the other end).

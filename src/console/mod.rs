@@ -8,8 +8,9 @@
 
 pub mod writer;
 
+use crate::output::bank::RegisterBank;
 use crate::output::registers::{self, BLOCK_LEN, status};
-use crate::service::health::Shared;
+use crate::status::Shared;
 use std::fmt::Write as _;
 use std::time::Duration;
 
@@ -119,8 +120,8 @@ fn fault_name(code: u16) -> &'static str {
 }
 
 /// One-line activity summary (console `activity`, `stream`, the live view).
-pub fn activity_line(shared: &Shared) -> String {
-    let r = shared.bank.block();
+pub fn activity_line(shared: &Shared, bank: &RegisterBank) -> String {
+    let r = bank.block();
     let h = shared.health();
     match h.last_sample {
         Some(s) => format!(
@@ -158,7 +159,7 @@ impl Session {
     }
 
     /// Feeds received bytes; appends echo and replies to `out`, in order.
-    pub fn feed(&mut self, bytes: &[u8], shared: &Shared, out: &mut String) {
+    pub fn feed(&mut self, bytes: &[u8], shared: &Shared, bank: &RegisterBank, out: &mut String) {
         for &b in bytes {
             if self.echo {
                 let was_cr = std::mem::replace(&mut self.echo_cr, b == b'\r');
@@ -177,7 +178,7 @@ impl Session {
             self.reader.feed(std::slice::from_ref(&b), |e| event = Some(e));
             let Some(e) = event else { continue };
             match e {
-                LineEvent::Line(l) => self.command(&l, shared, out),
+                LineEvent::Line(l) => self.command(&l, shared, bank, out),
                 LineEvent::TooLong => {
                     // The echoed characters are on the line: the error goes on its own.
                     if self.echo {
@@ -191,7 +192,7 @@ impl Session {
     }
 
     /// Executes one command line.
-    pub fn command(&mut self, line: &str, shared: &Shared, out: &mut String) {
+    pub fn command(&mut self, line: &str, shared: &Shared, bank: &RegisterBank, out: &mut String) {
         let lower = line.to_ascii_lowercase();
         let mut words = lower.split_whitespace();
         let cmd = words.next().unwrap_or("");
@@ -205,7 +206,7 @@ impl Session {
                 Ok(())
             }
             ("status", None, _) => {
-                let r = shared.bank.block();
+                let r = bank.block();
                 let h = shared.health();
                 let _ = write!(
                     body,
@@ -228,7 +229,7 @@ impl Session {
                 Ok(())
             }
             ("activity", None, _) => {
-                body.push_str(&activity_line(shared));
+                body.push_str(&activity_line(shared, bank));
                 Ok(())
             }
             ("tracks", None, _) => {
@@ -254,17 +255,17 @@ impl Session {
                 Ok(())
             }
             ("regs", None, _) => {
-                let r = shared.bank.block();
+                let r = bank.block();
                 for (i, v) in r.iter().enumerate() {
                     let _ = write!(body, "{i:2}: {v:5} 0x{v:04x}{}", if i % 4 == 3 { "\n" } else { "   " });
                 }
-                let w = shared.bank.writable();
+                let w = bank.writable();
                 let _ = write!(body, "hr100-103 (plc writable): {} {} {} {}", w[0], w[1], w[2], w[3]);
                 Ok(())
             }
             ("counters", None, _) => {
                 let h = shared.health();
-                let m = shared.bank.counters();
+                let m = bank.counters();
                 let q = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.0} ms"));
                 let _ = write!(
                     body,
@@ -348,7 +349,7 @@ impl Session {
 /// Serves the console on an open port until a stop is requested. I/O errors end the session (the
 /// caller reopens the device). Writes never wait ([`writer`]): input is read every 100 ms at the
 /// latest whatever the peer does with the output.
-pub fn serve(port: &mut serialport::TTYPort, shared: &Shared, echo: bool) -> std::io::Result<()> {
+pub fn serve(port: &mut serialport::TTYPort, shared: &Shared, bank: &RegisterBank, echo: bool) -> std::io::Result<()> {
     use std::io::Read as _;
     use std::os::fd::AsRawFd as _;
     let fd = port.as_raw_fd();
@@ -357,25 +358,25 @@ pub fn serve(port: &mut serialport::TTYPort, shared: &Shared, echo: bool) -> std
     let mut session = Session { echo, ..Session::default() };
     let mut buf = [0u8; 256];
     let mut out = String::with_capacity(1024);
-    let mut last_hb = shared.bank.block()[12];
+    let mut last_hb = bank.block()[12];
     let mut stalled = false;
     output.push(b"fme console ready (type help)\r\n");
     while !shared.stopping() {
         match port.read(&mut buf) {
             Ok(0) => {}
-            Ok(n) => session.feed(&buf[..n], shared, &mut out),
+            Ok(n) => session.feed(&buf[..n], shared, bank, &mut out),
             Err(e) if e.kind() == std::io::ErrorKind::TimedOut || e.kind() == std::io::ErrorKind::WouldBlock => {}
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
             Err(e) => return Err(e),
         }
-        let hb = shared.bank.block()[12];
+        let hb = bank.block()[12];
         if session.stream && hb != last_hb {
             // Do not split what the technician is typing: new line, the update, then redraw the input.
             let partial = session.partial_echo().map(str::to_owned);
             if partial.is_some() {
                 out.push_str("\r\n");
             }
-            out.push_str(&activity_line(shared));
+            out.push_str(&activity_line(shared, bank));
             out.push_str("\r\n");
             if let Some(p) = partial {
                 out.push_str(&p);
@@ -403,14 +404,14 @@ pub fn serve(port: &mut serialport::TTYPort, shared: &Shared, echo: bool) -> std
 }
 
 /// Opens `device` and serves the console, reopening with backoff after errors, until a stop.
-pub fn run_on_device(device: &str, baud: u32, echo: bool, shared: &Shared) {
+pub fn run_on_device(device: &str, baud: u32, echo: bool, shared: &Shared, bank: &RegisterBank) {
     let mut backoff = crate::capture::Backoff::new(Duration::from_millis(500), Duration::from_secs(30));
     while !shared.stopping() {
         match serialport::new(device, baud).timeout(Duration::from_millis(100)).open_native() {
             Ok(mut port) => {
                 backoff.reset();
                 shared.log(tracing::Level::INFO, format!("console on {device} at {baud} baud"));
-                if let Err(e) = serve(&mut port, shared, echo) {
+                if let Err(e) = serve(&mut port, shared, bank, echo) {
                     shared.log(tracing::Level::WARN, format!("console {device}: {e}"));
                 }
             }
@@ -427,18 +428,16 @@ pub fn run_on_device(device: &str, baud: u32, echo: bool, shared: &Shared) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::output::bank::RegisterBank;
-    use std::sync::Arc;
 
-    fn shared() -> Shared {
-        Shared::new(Arc::new(RegisterBank::new()), "[source]\npath = \"x\"\n".into(), 50)
+    fn shared() -> (Shared, RegisterBank) {
+        (Shared::new("[source]\npath = \"x\"\n".into(), 50), RegisterBank::new())
     }
 
     fn run(input: &[u8]) -> String {
         let s = shared();
         let mut sess = Session::default();
         let mut out = String::new();
-        sess.feed(input, &s, &mut out);
+        sess.feed(input, &s.0, &s.1, &mut out);
         out
     }
 
@@ -470,9 +469,9 @@ mod tests {
         let s = shared();
         let mut sess = Session::default();
         let mut out = String::new();
-        sess.feed(b"stream on\n", &s, &mut out);
+        sess.feed(b"stream on\n", &s.0, &s.1, &mut out);
         assert!(sess.stream);
-        sess.feed(b"Stream OFF\nconfig\n", &s, &mut out);
+        sess.feed(b"Stream OFF\nconfig\n", &s.0, &s.1, &mut out);
         assert!(!sess.stream);
         assert!(out.contains("path = \"x\""));
     }
@@ -482,7 +481,7 @@ mod tests {
         let s = shared();
         let mut sess = Session { echo: true, ..Session::default() };
         let mut out = String::new();
-        sess.feed(b"vex\x7frsion\r\nhelp\x00\r\n", &s, &mut out);
+        sess.feed(b"vex\x7frsion\r\nhelp\x00\r\n", &s.0, &s.1, &mut out);
         assert!(out.starts_with("vex\x08 \x08rsion\r\nfme "), "{out:?}");
         assert!(out.contains("OK\r\nhelp\r\nERR binary input ignored\r\n"), "{out:?}");
     }
@@ -492,11 +491,11 @@ mod tests {
         let s = shared();
         let mut sess = Session { echo: true, ..Session::default() };
         let mut out = String::new();
-        sess.feed(b"stat", &s, &mut out);
+        sess.feed(b"stat", &s.0, &s.1, &mut out);
         assert_eq!(sess.partial_echo(), Some("stat"));
-        sess.feed(b"us\r", &s, &mut out);
+        sess.feed(b"us\r", &s.0, &s.1, &mut out);
         assert_eq!(sess.partial_echo(), None);
-        sess.feed(b"\x01", &s, &mut out);
+        sess.feed(b"\x01", &s.0, &s.1, &mut out);
         assert_eq!(sess.partial_echo(), None, "binary input is not redrawn");
     }
 
@@ -505,15 +504,15 @@ mod tests {
         let s = shared();
         let mut sess = Session { echo: true, ..Session::default() };
         let mut out = String::new();
-        sess.feed(&[b'a'; 100], &s, &mut out);
-        sess.feed(b"\r\nversion\r\n", &s, &mut out);
+        sess.feed(&[b'a'; 100], &s.0, &s.1, &mut out);
+        sess.feed(b"\r\nversion\r\n", &s.0, &s.1, &mut out);
         let lines: Vec<&str> = out.split("\r\n").collect();
         assert_eq!(lines[0], "a".repeat(MAX_LINE), "the echo stops at the limit");
         assert!(lines[1].starts_with("ERR line too long"), "{out:?}");
         assert!(out.ends_with("OK\r\n"));
         let mut quiet = Session::default();
         let mut out = String::new();
-        quiet.feed(&[b'a'; 100], &s, &mut out);
+        quiet.feed(&[b'a'; 100], &s.0, &s.1, &mut out);
         assert!(out.starts_with("ERR line too long"), "no echo, no extra line: {out:?}");
     }
 

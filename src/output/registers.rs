@@ -60,26 +60,7 @@ pub mod status {
     pub const TOO_FEW_FISH: u16 = 1 << 6;
 }
 
-/// Fault code of register 11: the most severe current problem.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[repr(u16)]
-pub enum FaultCode {
-    /// 0: no fault.
-    #[default]
-    None = 0,
-    /// 1: camera lost or stalled (reconnecting).
-    Camera = 1,
-    /// 2: detector failed.
-    Detector = 2,
-    /// 3: depth network failed.
-    Depth = 3,
-    /// 4: pipeline stalled (no frame processed within `service.stall_after_s`).
-    PipelineStalled = 4,
-    /// 5: PLC link down (client modes).
-    PlcLink = 5,
-    /// 6: the daemon has stopped (final write before exit).
-    Stopped = 6,
-}
+pub use crate::status::FaultCode;
 
 /// Everything the register block is computed from (a pure value: the encoder has no I/O).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

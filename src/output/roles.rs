@@ -7,7 +7,7 @@ use super::bank::RegisterBank;
 use super::modbus::{self, ClientSettings, ClientTarget, ModbusError};
 use crate::capture::Backoff;
 use crate::config::{Config, ModbusMode};
-use crate::service::health::Shared;
+use crate::status::Shared;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};

@@ -11,7 +11,7 @@
 //!
 //! [`build_pipeline`] returns the pipeline `fme run` uses ([`crate::pipeline::FishPipeline`]).
 
-pub mod health;
+
 pub mod publish;
 pub mod signals;
 
@@ -20,7 +20,7 @@ use crate::config::Config;
 use crate::output::bank::RegisterBank;
 use crate::output::roles::RoleError;
 use crate::pipeline::{Calibration, FishPipeline, Pipeline};
-use health::Shared;
+use crate::status::Shared;
 use publish::Publisher;
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
@@ -80,6 +80,7 @@ pub struct RunOptions {
 pub struct Daemon {
     cfg: Config,
     shared: Arc<Shared>,
+    bank: Arc<RegisterBank>,
     publisher: Arc<Mutex<Publisher>>,
     modbus_addr: Option<SocketAddr>,
     stop_tx: tokio::sync::watch::Sender<bool>,
@@ -379,10 +380,10 @@ impl Daemon {
             None => None,
         };
         let bank = Arc::new(RegisterBank::new());
-        let shared = Arc::new(Shared::new(bank.clone(), config_text, cfg.console.log_lines));
+        let shared = Arc::new(Shared::new(config_text, cfg.console.log_lines));
         shared.with_health(|h| h.source = source.describe());
         shared.log(Level::INFO, format!("fme {} starting on {}", env!("CARGO_PKG_VERSION"), source.describe()));
-        let publisher = Arc::new(Mutex::new(Publisher::new(&cfg)));
+        let publisher = Arc::new(Mutex::new(Publisher::new(&cfg, bank.clone())));
         // Publish a first block at once so a PLC never reads all zeros from a running box.
         let _ = publisher.lock().unwrap_or_else(|p| p.into_inner()).publish(&shared, Instant::now(), false);
 
@@ -393,12 +394,12 @@ impl Daemon {
         let serial_tx = roles.serial_tx;
         let mut other_threads: Vec<_> = roles.serial_thread.into_iter().collect();
         if cfg.console.enabled {
-            let (dev, baud, echo, sh) =
-                (cfg.console.device.clone(), cfg.console.baud, cfg.console.echo, shared.clone());
+            let (dev, baud, echo, sh, bk) =
+                (cfg.console.device.clone(), cfg.console.baud, cfg.console.echo, shared.clone(), bank.clone());
             other_threads.push(
                 std::thread::Builder::new()
                     .name("fme-console".into())
-                    .spawn(move || crate::console::run_on_device(&dev, baud, echo, &sh))
+                    .spawn(move || crate::console::run_on_device(&dev, baud, echo, &sh, &bk))
                     .map_err(|error| ServiceError::Spawn { what: "console", error })?,
             );
         }
@@ -459,7 +460,7 @@ impl Daemon {
             }
         }));
         if cfg.service.live_view_s > 0.0 {
-            let sh = shared.clone();
+            let (sh, bk) = (shared.clone(), bank.clone());
             let every = Duration::from_secs_f64(cfg.service.live_view_s);
             aux_tasks.push(tokio::spawn(async move {
                 let mut tick = tokio::time::interval(every);
@@ -468,7 +469,7 @@ impl Daemon {
                     if sh.stopping() {
                         return;
                     }
-                    eprint!("\r{}   ", crate::console::activity_line(&sh));
+                    eprint!("\r{}   ", crate::console::activity_line(&sh, &bk));
                 }
             }));
         }
@@ -478,6 +479,7 @@ impl Daemon {
         Ok(Self {
             cfg,
             shared,
+            bank,
             publisher,
             modbus_addr,
             stop_tx,
@@ -492,9 +494,14 @@ impl Daemon {
         })
     }
 
-    /// Shared state (health, registers, logs).
+    /// Shared state (health, logs).
     pub fn shared(&self) -> &Arc<Shared> {
         &self.shared
+    }
+
+    /// The register bank the Modbus roles serve.
+    pub fn bank(&self) -> &Arc<RegisterBank> {
+        &self.bank
     }
 
     /// SIGHUP: checks the calibration file again and says what it found (journal and console

@@ -1,6 +1,8 @@
 //! Turns the health snapshot into register blocks: status bits, fault code, heartbeat, feeding rule.
 
-use super::health::{Health, Shared};
+use crate::output::bank::RegisterBank;
+use crate::status::{Health, Shared};
+use std::sync::Arc;
 use crate::config::{Config, ModbusMode, WordOrder};
 use crate::output::feeding::FeedingRule;
 use crate::output::registers::{self, FaultCode, RegisterInputs, status};
@@ -13,6 +15,7 @@ pub const SERVER_LINK_WINDOW: Duration = Duration::from_secs(10);
 /// behind a mutex in [`super::Daemon`].
 #[derive(Debug)]
 pub struct Publisher {
+    bank: Arc<RegisterBank>,
     heartbeat: u16,
     feeding: FeedingRule,
     order: WordOrder,
@@ -27,9 +30,10 @@ pub struct Publisher {
 }
 
 impl Publisher {
-    /// A publisher for `cfg`.
-    pub fn new(cfg: &Config) -> Self {
+    /// A publisher for `cfg` writing to `bank`.
+    pub fn new(cfg: &Config, bank: Arc<RegisterBank>) -> Self {
         Self {
+            bank,
             heartbeat: 0,
             feeding: FeedingRule::new(cfg.feeding.clone()),
             order: cfg.output.modbus.word_order,
@@ -126,7 +130,7 @@ impl Publisher {
             return &self.line;
         }
         self.stopped = stopped;
-        let bank = &shared.bank;
+        let bank = self.bank.clone();
         let link = match self.mode {
             ModbusMode::Off => false,
             ModbusMode::TcpServer | ModbusMode::RtuServer => bank.served_within(SERVER_LINK_WINDOW),

@@ -1,12 +1,12 @@
-//! Health published as first-class status: one shared snapshot read by the registers, the console
-//! and the watchdog, plus a small ring of recent log lines for the console `log` command.
+//! Health as first-class status: one shared snapshot that the service writes and the registers,
+//! the console and the watchdog read, plus a small ring of recent log lines for the console `log`
+//! command, and the fault codes. A low module: the pipeline's types below it, and the service,
+//! output and console above it all use it, so none of them imports another upwards.
 
-use crate::output::bank::RegisterBank;
-use crate::output::registers::FaultCode;
 use crate::pipeline::{ActivitySample, CalibInfo, StageHealth};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Mutex;
 use std::time::Instant;
 
 /// Frame-to-register latency histogram: 1 ms buckets up to 1 s, one overflow bucket. Fixed size.
@@ -135,8 +135,6 @@ pub struct Shared {
     health: Mutex<Health>,
     log: Mutex<VecDeque<String>>,
     log_cap: usize,
-    /// The register bank.
-    pub bank: Arc<RegisterBank>,
     /// The configuration text as loaded (console `config`).
     pub config_text: String,
     stopping: AtomicBool,
@@ -144,12 +142,11 @@ pub struct Shared {
 
 impl Shared {
     /// New shared state keeping `log_lines` log lines.
-    pub fn new(bank: Arc<RegisterBank>, config_text: String, log_lines: usize) -> Self {
+    pub fn new(config_text: String, log_lines: usize) -> Self {
         Self {
             health: Mutex::new(Health::new()),
             log: Mutex::new(VecDeque::with_capacity(log_lines.max(1))),
             log_cap: log_lines.max(1),
-            bank,
             config_text,
             stopping: AtomicBool::new(false),
         }
@@ -218,7 +215,7 @@ mod tests {
 
     #[test]
     fn log_ring_keeps_last() {
-        let s = Shared::new(Arc::new(RegisterBank::new()), String::new(), 3);
+        let s = Shared::new(String::new(), 3);
         for i in 0..5 {
             s.log(tracing::Level::INFO, format!("m{i}"));
         }
@@ -228,3 +225,25 @@ mod tests {
         assert_eq!(s.last_logs(1).len(), 1);
     }
 }
+
+/// Fault code of register 11: the most severe current problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u16)]
+pub enum FaultCode {
+    /// 0: no fault.
+    #[default]
+    None = 0,
+    /// 1: camera lost or stalled (reconnecting).
+    Camera = 1,
+    /// 2: detector failed.
+    Detector = 2,
+    /// 3: depth network failed.
+    Depth = 3,
+    /// 4: pipeline stalled (no frame processed within `service.stall_after_s`).
+    PipelineStalled = 4,
+    /// 5: PLC link down (client modes).
+    PlcLink = 5,
+    /// 6: the daemon has stopped (final write before exit).
+    Stopped = 6,
+}
+
