@@ -1,7 +1,7 @@
 //! Steady-state capture allocates nothing per frame: a recorded source reading into recycled
 //! buffers, through the drop-oldest queue, back to the pool (counting global allocator).
 
-#[path = "daemon_support.rs"]
+#[path = "daemon/support.rs"]
 mod support;
 
 use fme::capture::{FrameQueue, FrameSource, RecordedSource};

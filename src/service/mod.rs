@@ -11,7 +11,6 @@
 //!
 //! [`build_pipeline`] returns the pipeline `fme run` uses ([`crate::pipeline::FishPipeline`]).
 
-
 pub mod publish;
 pub mod signals;
 

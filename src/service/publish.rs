@@ -1,11 +1,11 @@
 //! Turns the health snapshot into register blocks: status bits, fault code, heartbeat, feeding rule.
 
-use crate::output::bank::RegisterBank;
-use crate::status::{Health, Shared};
-use std::sync::Arc;
 use crate::config::{Config, ModbusMode, WordOrder};
+use crate::output::bank::RegisterBank;
 use crate::output::feeding::FeedingRule;
 use crate::output::registers::{self, FaultCode, RegisterInputs, status};
+use crate::status::{Health, Shared};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// A server-role PLC link counts as up when it polled within this window.

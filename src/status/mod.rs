@@ -5,8 +5,8 @@
 
 use crate::pipeline::{ActivitySample, CalibInfo, StageHealth};
 use std::collections::VecDeque;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Frame-to-register latency histogram: 1 ms buckets up to 1 s, one overflow bucket. Fixed size.
@@ -246,4 +246,3 @@ pub enum FaultCode {
     /// 6: the daemon has stopped (final write before exit).
     Stopped = 6,
 }
-

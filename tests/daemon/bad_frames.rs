@@ -1,8 +1,7 @@
 //! Frames far larger than the source's size are bad frames: dropped from their JPEG header before
 //! anything decodes them, counted, logged, and the daemon goes on with the next frame.
 
-#[path = "daemon_support.rs"]
-mod support;
+use crate::support;
 
 use fme::capture::{FrameSource, RecordedSource};
 use fme::service::{Daemon, RunOptions};

@@ -1,8 +1,7 @@
 //! Client roles: the daemon writes its block into an in-process PLC simulator (one FC16 per update);
 //! PLC down at start, dropping mid-run and back: the daemon keeps running and catches up.
 
-#[path = "daemon_support.rs"]
-mod support;
+use crate::support;
 
 use fme::capture::{Backoff, FrameSource, RecordedSource};
 use fme::config::{ModbusMode, WordOrder};

@@ -1,5 +1,5 @@
-//! Helpers shared by the daemon, Modbus and console tests (included with `#[path]`); as its own
-//! test target it only checks that a written sequence opens.
+//! Helpers shared by the daemon, Modbus and console tests of this test binary (and by
+//! `daemon_alloc`, which needs a test binary of its own for its counting allocator).
 #![allow(dead_code)]
 
 use fme::config::{Config, ModbusMode};

@@ -2,8 +2,7 @@
 //! fault code 4 "pipeline stalled" in the registers, while the rest of the daemon keeps running.
 //! Alone in its test binary because it sets NOTIFY_SOCKET / WATCHDOG_USEC for the process.
 
-#[path = "daemon_support.rs"]
-mod support;
+use crate::support;
 
 use fme::capture::{Frame, FrameSource, RecordedSource};
 use fme::output::registers::FaultCode;

@@ -1,8 +1,7 @@
 //! Modbus server roles against in-process clients: register reads, mirrored holding registers,
 //! exceptions for illegal addresses and functions, PLC-writable holding registers; TCP and RTU.
 
-#[path = "daemon_support.rs"]
-mod support;
+use crate::support;
 
 use fme::capture::{FrameSource, RecordedSource};
 use fme::config::{ModbusMode, WordOrder};

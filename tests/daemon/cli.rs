@@ -2,8 +2,7 @@
 //! recording is a clear error; an absent camera is reported and retried (the daemon keeps running);
 //! SIGTERM stops it within 2 s.
 
-#[path = "daemon_support.rs"]
-mod support;
+use crate::support;
 
 use std::io::Read;
 use std::process::{Command, Stdio};

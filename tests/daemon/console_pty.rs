@@ -1,8 +1,7 @@
 //! The field console over a pseudo-terminal pair, inside a running daemon: commands answer, fuzzed
 //! input (binary noise, over-long lines, garbage) gets error lines and never kills the daemon.
 
-#[path = "daemon_support.rs"]
-mod support;
+use crate::support;
 
 use fme::capture::{FrameSource, RecordedSource};
 use fme::service::{Daemon, RunOptions};

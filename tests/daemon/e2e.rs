@@ -1,7 +1,6 @@
 //! End to end: recorded sequence -> daemon -> in-process Modbus TCP client.
 
-#[path = "daemon_support.rs"]
-mod support;
+use crate::support;
 
 use fme::capture::{FrameSource, RecordedSource};
 use fme::config::WordOrder;
