@@ -173,7 +173,7 @@ impl Config {
         self.detector.validate().map_err(infer_err)?;
         self.depth.validate().map_err(infer_err)?;
         self.tracker.validate().map_err(|e| match e {
-            crate::track::ConfigError::Key(k, m) => (format!("tracker.{k}"), m),
+            crate::track::TrackerConfigError::Key(k, m) => (format!("tracker.{k}"), m),
             other => ("tracker".to_string(), other.to_string()),
         })?;
         self.postprocess.validate().map_err(keyed)?;

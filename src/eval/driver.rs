@@ -21,7 +21,7 @@ use crate::config::Config;
 use crate::geometry::Pixel;
 use crate::metric::{DepthSample, FitMethod, MapKind, ReferencePoints, RelativeMap, sample_fish, sample_median};
 use crate::mot::{MotAccumulator, MotMetrics};
-use crate::pipeline::{ActivitySample, Calibration, FishPipeline, Pipeline, SeriesRow as PipelineRow};
+use crate::pipeline::{ActivitySample, Calibration, FishPipeline, Pipeline, SeriesRow};
 use crate::sequence::Sequence;
 
 /// The `--depth` choice.
@@ -68,9 +68,9 @@ impl Default for EvalOptions {
 
 /// One frame of the scored series (`--series`): the pipeline's sample and the truth.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SeriesRow {
+pub struct ScoredRow {
     /// The frame and the sample the pipeline computed on it (what `fme run --series` writes).
-    pub row: PipelineRow,
+    pub row: SeriesRow,
     /// Ground-truth swarm speed (mean |v| over visible fish) at the time the estimate refers to
     /// (`t - latency`, interpolated between frames), m/s.
     pub true_mps: Option<f64>,
@@ -78,7 +78,7 @@ pub struct SeriesRow {
     pub true_now_mps: Option<f64>,
 }
 
-impl SeriesRow {
+impl ScoredRow {
     /// The estimate, when there is one.
     pub fn est_mps(&self) -> Option<f64> {
         let m = self.row.sample.mean.0;
@@ -194,7 +194,7 @@ pub struct EvalReport {
     pub detection: Option<DetectionScore>,
     /// Per-frame series (written by `--series`, not part of the JSON).
     #[serde(skip)]
-    pub series: Vec<SeriesRow>,
+    pub series: Vec<ScoredRow>,
     /// Per-fish rows (collected with [`EvalOptions::track_rows`], written by `--tracks`).
     #[serde(skip)]
     pub tracks: Vec<TrackRow>,
@@ -410,8 +410,8 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
                 speed_mps: v.speed.map(|s| s.0),
             }));
         }
-        series.push(SeriesRow {
-            row: PipelineRow { frame: u64::from(frame), sample },
+        series.push(ScoredRow {
+            row: SeriesRow { frame: u64::from(frame), sample },
             true_mps: None,
             true_now_mps: None,
         });
@@ -440,7 +440,7 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         r.true_now_mps = now;
         r.true_mps = if r.est_mps().is_some() { truth_at(r.t() - r.row.sample.latency.0) } else { now };
     }
-    let scored: Vec<&SeriesRow> = series.iter().filter(|r| r.true_mps.is_some() && r.est_mps().is_some()).collect();
+    let scored: Vec<&ScoredRow> = series.iter().filter(|r| r.true_mps.is_some() && r.est_mps().is_some()).collect();
     if scored.len() < 2 {
         return Err(EvalError::NothingToScore(format!(
             "{}: only {} frame(s) have both a true and an estimated swarm speed (boxes from {boxes_name}, {} boxes in total)",
@@ -522,7 +522,7 @@ fn csv_opt(v: Option<f64>) -> String {
 
 /// Writes the series the pipeline computed, in the columns of `fme run --series` (so the two files
 /// compare column by column) followed by the truth: `true_mps` (at `t - latency`) and `true_now_mps`.
-pub fn write_series(path: &Path, series: &[SeriesRow]) -> Result<(), EvalError> {
+pub fn write_series(path: &Path, series: &[ScoredRow]) -> Result<(), EvalError> {
     let err = |msg: String| EvalError::Output { path: path.to_path_buf(), msg };
     let mut w = crate::pipeline::SeriesWriter::create(path, ",true_mps,true_now_mps").map_err(err)?;
     for r in series {

@@ -17,7 +17,7 @@ pub fn plot_series(path: &Path, report: &EvalReport) -> Result<(), EvalError> {
     });
     let err = |e: String| EvalError::Output { path: path.to_path_buf(), msg: e };
     let s = &report.series;
-    let t_max = s.iter().map(super::SeriesRow::t).fold(0.0, f64::max).max(1e-3);
+    let t_max = s.iter().map(super::ScoredRow::t).fold(0.0, f64::max).max(1e-3);
     let v_max =
         s.iter().flat_map(|r| [r.true_mps, r.est_mps(), r.true_now_mps]).flatten().fold(0.0, f64::max).clamp(0.1, 5.0)
             * 1.1;
@@ -44,7 +44,7 @@ pub fn plot_series(path: &Path, report: &EvalReport) -> Result<(), EvalError> {
         .label_style(("sans-serif", 14))
         .draw()
         .map_err(|e| err(e.to_string()))?;
-    let line = |f: fn(&super::SeriesRow) -> Option<f64>| -> Vec<(f64, f64)> {
+    let line = |f: fn(&super::ScoredRow) -> Option<f64>| -> Vec<(f64, f64)> {
         s.iter().filter_map(|r| f(r).map(|v| (r.t(), v.min(v_max)))).collect()
     };
     let now_color = RGBColor(170, 170, 170);
@@ -59,7 +59,7 @@ pub fn plot_series(path: &Path, report: &EvalReport) -> Result<(), EvalError> {
         .label(format!("ground truth at t - {:.2} s (estimate latency)", report.latency_s))
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
     chart
-        .draw_series(LineSeries::new(line(super::SeriesRow::est_mps), BLUE.stroke_width(2)))
+        .draw_series(LineSeries::new(line(super::ScoredRow::est_mps), BLUE.stroke_width(2)))
         .map_err(|e| err(e.to_string()))?
         .label("estimated (fme)")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));

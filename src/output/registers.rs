@@ -1,4 +1,4 @@
-//! The Modbus register map: a stable contract for PLC programmers (documented in the README).
+//! The Modbus register map: a stable contract for PLC programmers (docs/plc-integration.md).
 //!
 //! 0-based PDU addresses. float32 and uint32 use two registers; the word order is configurable
 //! (default high word first). Input registers 0..[`BLOCK_LEN`] hold the block below; holding registers

@@ -125,38 +125,38 @@ impl TrackerConfig {
     }
 
     /// Checks ranges; returns the first offending key.
-    pub fn validate(&self) -> Result<(), ConfigError> {
+    pub fn validate(&self) -> Result<(), TrackerConfigError> {
         let unit = |k: &str, v: f64| {
             if (0.0..=1.0).contains(&v) {
                 Ok(())
             } else {
-                Err(ConfigError::Key(k.into(), format!("{v} is not in [0, 1]")))
+                Err(TrackerConfigError::Key(k.into(), format!("{v} is not in [0, 1]")))
             }
         };
         unit("iou_threshold", self.iou_threshold)?;
         unit("low_iou_thresh", self.low_iou_thresh)?;
         unit("unconfirmed_iou_thresh", self.unconfirmed_iou_thresh)?;
         if self.det_thresh.is_nan() || self.track_thresh.is_nan() || self.new_track_thresh.is_nan() {
-            return Err(ConfigError::Key("det_thresh".into(), "score thresholds must not be NaN".into()));
+            return Err(TrackerConfigError::Key("det_thresh".into(), "score thresholds must not be NaN".into()));
         }
         if !(self.max_age_s >= 0.0 && self.max_age_s.is_finite()) {
-            return Err(ConfigError::Key("max_age_s".into(), format!("{} is not a finite time >= 0", self.max_age_s)));
+            return Err(TrackerConfigError::Key("max_age_s".into(), format!("{} is not a finite time >= 0", self.max_age_s)));
         }
         if !(self.depth_weight >= 0.0 && self.depth_weight.is_finite()) {
-            return Err(ConfigError::Key("depth_weight".into(), format!("{} is not >= 0", self.depth_weight)));
+            return Err(TrackerConfigError::Key("depth_weight".into(), format!("{} is not >= 0", self.depth_weight)));
         }
         if !(self.buffer_rate >= 0.0 && self.buffer_max >= 0.0 && self.buffer_max.is_finite()) {
-            return Err(ConfigError::Key("buffer_rate".into(), "buffer_rate and buffer_max must be >= 0".into()));
+            return Err(TrackerConfigError::Key("buffer_rate".into(), "buffer_rate and buffer_max must be >= 0".into()));
         }
         if self.max_tracks == 0 || self.max_tracks > super::MAX_TRACKS {
-            return Err(ConfigError::Key(
+            return Err(TrackerConfigError::Key(
                 "max_tracks".into(),
                 format!("{} is not in 1..={}", self.max_tracks, super::MAX_TRACKS),
             ));
         }
         let n = self.noise;
         if !(n.meas > 0.0 && n.accel > 0.0 && n.init_vel > 0.0) {
-            return Err(ConfigError::Key("noise".into(), "meas, accel and init_vel must be > 0".into()));
+            return Err(TrackerConfigError::Key("noise".into(), "meas, accel and init_vel must be > 0".into()));
         }
         Ok(())
     }
@@ -164,7 +164,7 @@ impl TrackerConfig {
 
 /// A configuration error naming the key.
 #[derive(Debug, thiserror::Error)]
-pub enum ConfigError {
+pub enum TrackerConfigError {
     /// Not valid TOML or an unknown/ill-typed key (the message names it).
     #[error("tracker config: {0}")]
     Toml(String),
@@ -203,14 +203,14 @@ struct Patch {
 }
 
 impl TryFrom<Patch> for TrackerConfig {
-    type Error = ConfigError;
-    fn try_from(p: Patch) -> Result<Self, ConfigError> {
+    type Error = TrackerConfigError;
+    fn try_from(p: Patch) -> Result<Self, TrackerConfigError> {
         p.apply()
     }
 }
 
 impl Patch {
-    fn apply(self) -> Result<TrackerConfig, ConfigError> {
+    fn apply(self) -> Result<TrackerConfig, TrackerConfigError> {
         let mut c = TrackerConfig::preset(self.preset.unwrap_or_default());
         macro_rules! set {
             ($($k:ident),*) => { $( if let Some(v) = self.$k { c.$k = v; } )* };

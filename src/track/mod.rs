@@ -50,5 +50,5 @@ pub mod kalman;
 mod tracker;
 pub mod tune;
 
-pub use config::{ConfigError, Mode, Preset, TrackerConfig};
+pub use config::{Mode, Preset, TrackerConfig, TrackerConfigError};
 pub use tracker::{Detection, MAX_DETS, MAX_TRACKS, TrackError, TrackOutput, Tracker, TrackerStats};

@@ -480,7 +480,7 @@ impl Tracker {
         for (a, &j) in self.rows.iter().enumerate() {
             let tr = &self.tracks[j as usize];
             // Only tentative tracks (velocity still unknown) get the buffer: on confirmed and lost
-            // tracks it caused wrong matches on mot15 (measured, see the README).
+            // tracks it caused wrong matches when measured on mot15.
             let buf = if buffered && tr.state == TrackState::Tentative {
                 (self.cfg.buffer_rate * (t - tr.t_last)).min(self.cfg.buffer_max)
             } else {
