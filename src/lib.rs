@@ -40,6 +40,7 @@ pub mod motion;
 pub mod output;
 pub mod pipeline;
 pub mod postprocess;
+pub mod record;
 pub mod rng;
 pub mod sequence;
 pub mod service;

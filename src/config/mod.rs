@@ -246,6 +246,31 @@ impl Config {
         if self.service.stop_grace_ms > 1500 {
             return err("service.stop_grace_ms", "must be <= 1500 ms (shutdown must finish within 2 s)");
         }
+        let r = &self.record;
+        positive("record.ring_s", r.ring_s)?;
+        if r.max_disk_mb == 0 {
+            return err("record.max_disk_mb", "must be > 0 MB");
+        }
+        if !(r.snapshot_every_s >= 0.0 && r.snapshot_every_s.is_finite()) {
+            return err("record.snapshot_every_s", "must be >= 0 s (0 = off)");
+        }
+        if r.keep_snapshots == 0 {
+            return err("record.keep_snapshots", "must be >= 1");
+        }
+        for (k, v) in [("record.alarm_low_mps", r.alarm_low_mps), ("record.alarm_high_mps", r.alarm_high_mps)] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return err(k, "must be >= 0 m/s (0 = off)");
+            }
+        }
+        if r.alarm_high_mps > 0.0 && r.alarm_high_mps <= r.alarm_low_mps {
+            return err("record.alarm_high_mps", "must be > record.alarm_low_mps");
+        }
+        if !(r.freeze_min_gap_s >= 0.0 && r.freeze_min_gap_s.is_finite()) {
+            return err("record.freeze_min_gap_s", "must be >= 0 s");
+        }
+        if r.queue_frames == 0 || r.queue_frames > 1024 {
+            return err("record.queue_frames", format!("must be 1..=1024, got {}", r.queue_frames));
+        }
         Ok(())
     }
 }

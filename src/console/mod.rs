@@ -101,6 +101,7 @@ fn status_words(bits: u16) -> String {
         (status::STALE, "stale"),
         (status::PLC_LINK_OK, "plc-link-ok"),
         (status::TOO_FEW_FISH, "too-few-fish"),
+        (status::RECORD_FAULT, "record-fault"),
     ];
     let v: Vec<&str> = names.iter().filter(|(b, _)| bits & b != 0).map(|(_, n)| *n).collect();
     if v.is_empty() { "-".into() } else { v.join(" ") }
@@ -138,7 +139,7 @@ pub fn activity_line(shared: &Shared, bank: &RegisterBank) -> String {
     }
 }
 
-const HELP: &str = "commands (case-insensitive, read-only):
+const HELP: &str = "commands (case-insensitive; only snap and record save write, to the state directory):
   help            this list
   status          running state, status bits, fault, source, uptime
   version         fme version and register-map version
@@ -149,7 +150,10 @@ const HELP: &str = "commands (case-insensitive, read-only):
   counters        frames, drops, errors, reconnects, modbus, latency
   log [n]         last n log lines (default 10)
   stream on|off   print one activity line per update
-  config          the configuration file in use";
+  config          the configuration file in use
+  snap            snapshot of the next frame (overlays + depth map) into snapshots/
+  record          black box state: ring size, drops, errors, last file
+  record save [l] freeze the black box into recordings/<UTC>-<l>/";
 
 impl Session {
     /// The partly typed line as echoed so far (to redraw it after a streamed line), if any.
@@ -200,7 +204,50 @@ impl Session {
         let extra = words.next();
         let mut body = String::new();
         let result: Result<(), String> = match (cmd, arg, extra) {
+            ("record", Some("save"), label) => {
+                if words.next().is_some() {
+                    Err("usage: record save [label]".into())
+                } else if shared.health().record.active {
+                    shared.requests.request_save(label.unwrap_or("manual"));
+                    body.push_str("saving: see `record` or `log` for the folder");
+                    Ok(())
+                } else {
+                    Err("no black box: record.enabled = false, or no state directory".into())
+                }
+            }
             (_, _, Some(_)) => Err(format!("too many arguments for `{cmd}`")),
+            ("snap", None, _) => {
+                shared.requests.request_snapshot();
+                body.push_str("snapshot of the next frame requested: see `record` or `log` for the file");
+                Ok(())
+            }
+            ("record", None, _) => {
+                let r = shared.health().record;
+                let _ = write!(
+                    body,
+                    "ring {}
+ring-frames {}
+ring-mb {:.1}
+frames-written {}
+frames-dropped {}
+write-errors {}
+disk {}
+saved {}
+snapshots {}
+last {}",
+                    if r.active { "on" } else { "off" },
+                    r.ring_frames,
+                    r.ring_bytes as f64 / 1e6,
+                    r.frames_written,
+                    r.frames_dropped,
+                    r.write_errors,
+                    if r.disk_fault { "FAULT (recording paused)" } else { "ok" },
+                    r.saved,
+                    r.snapshots,
+                    if r.last.is_empty() { "-" } else { &r.last }
+                );
+                Ok(())
+            }
             ("help" | "?", None, _) => {
                 body.push_str(HELP);
                 Ok(())
@@ -269,7 +316,7 @@ impl Session {
                 let q = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.0} ms"));
                 let _ = write!(
                     body,
-                    "frames-captured {}\nframes-processed {}\nframes-dropped {}\ncamera-fps {:.1}\ncapture-errors {}\nreconnects {}\npipeline-errors {}\nupdates {}\nmodbus-requests {}\nmodbus-exceptions {}\nmodbus-tcp-open {}\nmodbus-tcp-idle-closed {}\nmodbus-tcp-evicted {}\nmodbus-tcp-accept-errors {}\nmodbus-tcp-refused {}\nmodbus-tcp-bad-frames {}\nmodbus-task-panics {}\nplc-writes {}\nplc-failures {}\nconsole-output-dropped {}\nlatency-p50 {}\nlatency-p99 {}",
+                    "frames-captured {}\nframes-processed {}\nframes-dropped {}\ncamera-fps {:.1}\ncapture-errors {}\nreconnects {}\npipeline-errors {}\nupdates {}\nmodbus-requests {}\nmodbus-exceptions {}\nmodbus-tcp-open {}\nmodbus-tcp-idle-closed {}\nmodbus-tcp-evicted {}\nmodbus-tcp-accept-errors {}\nmodbus-tcp-refused {}\nmodbus-tcp-bad-frames {}\nmodbus-task-panics {}\nplc-writes {}\nplc-failures {}\nconsole-output-dropped {}\nrecord-written {}\nrecord-dropped {}\nrecord-write-errors {}\nlatency-p50 {}\nlatency-p99 {}",
                     h.frames_captured,
                     h.frames_processed,
                     h.frames_dropped,
@@ -290,6 +337,9 @@ impl Session {
                     m.client_writes,
                     m.client_failures,
                     writer::output_dropped(),
+                    h.record.frames_written,
+                    h.record.frames_dropped,
+                    h.record.write_errors,
                     q(h.latency.quantile_ms(0.5)),
                     q(h.latency.quantile_ms(0.99)),
                 );

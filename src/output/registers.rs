@@ -58,6 +58,9 @@ pub mod status {
     pub const PLC_LINK_OK: u16 = 1 << 5;
     /// Bit 6: too few fish tracked for a reliable mean.
     pub const TOO_FEW_FISH: u16 = 1 << 6;
+    /// Bit 7: recording paused after a disk write error (disk full, read-only; docs/recording.md).
+    /// The activity values are unaffected.
+    pub const RECORD_FAULT: u16 = 1 << 7;
 }
 
 pub use crate::status::FaultCode;

@@ -15,7 +15,10 @@
 
 use super::rate::RateMeter;
 use super::substitute::{DepthView, Substitute};
-use super::{ActivitySample, CalibInfo, Calibration, Frame, Pipeline, PipelineError, QualityFlags, StageHealth};
+use super::{
+    ActivitySample, CalibInfo, Calibration, Frame, FrameView, Pipeline, PipelineError, QualityFlags, StageHealth,
+    TrackRecord,
+};
 use crate::config::Config;
 use crate::geometry::{Camera, PixelBox};
 use crate::infer::{self, DepthNet, Detector, FramePlan, InferSchedule, RgbFrame};
@@ -420,6 +423,42 @@ impl Pipeline for FishPipeline {
 
     fn calib(&self) -> CalibInfo {
         self.calib
+    }
+
+    fn frame_view(&self, out: &mut FrameView) {
+        out.clear();
+        out.detected = self.ran.detect;
+        if self.ran.detect {
+            out.detections.extend(self.dets.iter().map(|d| (d.bbox, d.score)));
+        }
+        let t = self.last_t.unwrap_or(f64::NAN);
+        out.tracks.extend(self.estimator.tracks().filter(|v| v.last_seen.0 == t).map(|v| TrackRecord {
+            id: v.id,
+            bbox: v.bbox,
+            depth_m: v.depth.map_or(f64::NAN, |d| d.0),
+            speed_mps: v.speed.map_or(f64::NAN, |s| s.0),
+        }));
+    }
+
+    fn depth_grid(&self, size: (u32, u32), grid: (u32, u32), out: &mut Vec<f32>) -> bool {
+        let Some(view) = self.depth_view() else { return false };
+        let fit = self.fit.as_ref();
+        if view.kind() == MapKind::InverseDepth && fit.is_none() {
+            return false;
+        }
+        out.clear();
+        let (cw, ch) = (f64::from(size.0) / f64::from(grid.0.max(1)), f64::from(size.1) / f64::from(grid.1.max(1)));
+        for r in 0..grid.1 {
+            for c in 0..grid.0 {
+                let px = crate::geometry::Pixel { u: (f64::from(c) + 0.5) * cw, v: (f64::from(r) + 0.5) * ch };
+                let d = view.grid(px).and_then(|x| match view.kind() {
+                    MapKind::Depth => Some(x),
+                    MapKind::InverseDepth => fit.and_then(|f| f.depth(x)).map(|m| m.0),
+                });
+                out.push(d.map_or(f32::NAN, |d| d as f32));
+            }
+        }
+        true
     }
 
     fn describe_tracks(&self, out: &mut dyn std::fmt::Write, max: usize) -> std::fmt::Result {

@@ -19,6 +19,7 @@ mod series;
 mod substitute;
 
 pub use calibration::Calibration;
+
 pub use fish::{FishPipeline, FitStats};
 pub use frame::{Frame, PixelFormat};
 pub use series::{SeriesRow, SeriesWriter};
@@ -103,6 +104,49 @@ pub trait Pipeline: Send {
     /// Writes one line per confirmed track (console `tracks`), at most `max` lines.
     fn describe_tracks(&self, _out: &mut dyn std::fmt::Write, _max: usize) -> std::fmt::Result {
         Ok(())
+    }
+    /// Fills `out` with what the last frame produced (the black box and snapshots,
+    /// docs/recording.md). The default: nothing.
+    fn frame_view(&self, out: &mut FrameView) {
+        out.clear();
+    }
+    /// Metric depth (m, NaN where unknown) on a `cols` x `rows` grid of cell centres over a
+    /// `width` x `height` image, row-major into `out`; false when there is no metric depth yet.
+    fn depth_grid(&self, _size: (u32, u32), _grid: (u32, u32), _out: &mut Vec<f32>) -> bool {
+        false
+    }
+}
+
+/// One tracked fish on a frame, for the black box and snapshots.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackRecord {
+    /// Track id.
+    pub id: u32,
+    /// Corrected box, px.
+    pub bbox: crate::geometry::PixelBox,
+    /// Corrected depth, m (NaN when unknown).
+    pub depth_m: f64,
+    /// 3D speed, m/s (NaN when unknown).
+    pub speed_mps: f64,
+}
+
+/// What one frame produced: the detections (when the detector ran on it) and the tracked fish.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FrameView {
+    /// The detector ran on this frame.
+    pub detected: bool,
+    /// Its detections: box and score.
+    pub detections: Vec<(crate::geometry::PixelBox, f64)>,
+    /// The fish tracked on this frame.
+    pub tracks: Vec<TrackRecord>,
+}
+
+impl FrameView {
+    /// Empties the view, keeping its capacity.
+    pub fn clear(&mut self) {
+        self.detected = false;
+        self.detections.clear();
+        self.tracks.clear();
     }
 }
 

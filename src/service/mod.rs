@@ -259,6 +259,7 @@ struct PipelineCtx {
     series: Option<crate::pipeline::SeriesWriter>,
     watchdog: Option<Duration>,
     finished: tokio::sync::watch::Sender<bool>,
+    recorder: Option<crate::record::Recorder>,
 }
 
 fn pipeline_loop(mut c: PipelineCtx) {
@@ -275,6 +276,9 @@ fn pipeline_loop(mut c: PipelineCtx) {
             last_ping = Some(Instant::now());
         }
         let Some(frame) = c.queue.pop(Duration::from_millis(100)) else {
+            if let Some(r) = c.recorder.as_mut() {
+                r.watch(None, errors);
+            }
             if c.queue.is_closed() && c.queue.is_empty() {
                 break;
             }
@@ -312,6 +316,11 @@ fn pipeline_loop(mut c: PipelineCtx) {
                 None
             }
         };
+        if let Some(r) = c.recorder.as_mut() {
+            // Never waits: a full queue drops the frame from the recording (counted).
+            r.after_frame(&frame, &*c.pipeline, sample);
+            r.watch(sample.as_ref(), errors);
+        }
         if sample.is_some() {
             let next = next_out.get_or_insert(ts);
             if ts + 1e-9 >= *next || ts < *next - 2.0 * c.output_period_s {
@@ -360,6 +369,9 @@ fn pipeline_loop(mut c: PipelineCtx) {
     }
     if let Some(Err(e)) = c.series.take().map(crate::pipeline::SeriesWriter::finish) {
         c.shared.log(Level::ERROR, format!("--series: {e}"));
+    }
+    if let Some(r) = c.recorder.as_mut() {
+        r.close();
     }
     let _ = c.finished.send(true);
 }
@@ -418,6 +430,10 @@ impl Daemon {
         );
         let watchdog = if cfg.service.systemd_notify { sd_notify::watchdog_enabled() } else { None };
         let (finished_tx, finished) = tokio::sync::watch::channel(false);
+        let mut recorder = crate::record::Recorder::start(&cfg, shared.clone());
+        if let Some(t) = recorder.as_mut().and_then(crate::record::Recorder::take_thread) {
+            other_threads.push(t);
+        }
         let ctx = PipelineCtx {
             pipeline,
             queue,
@@ -429,6 +445,7 @@ impl Daemon {
             series,
             watchdog,
             finished: finished_tx,
+            recorder,
         };
         let pipeline_thread = Some(
             std::thread::Builder::new()

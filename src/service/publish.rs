@@ -86,6 +86,9 @@ impl Publisher {
         if h.last_sample.is_none_or(|s| s.flags.too_few_fish) {
             bits |= status::TOO_FEW_FISH;
         }
+        if h.record.disk_fault {
+            bits |= status::RECORD_FAULT;
+        }
         let client = matches!(self.mode, ModbusMode::TcpClient | ModbusMode::RtuClient);
         let fault = if stopped {
             FaultCode::Stopped

@@ -3,6 +3,10 @@
 //! command, and the fault codes. A low module: the pipeline's types below it, and the service,
 //! output and console above it all use it, so none of them imports another upwards.
 
+mod state_dir;
+
+pub use state_dir::state_dir;
+
 use crate::pipeline::{ActivitySample, CalibInfo, StageHealth};
 use std::collections::VecDeque;
 use std::sync::Mutex;
@@ -100,6 +104,65 @@ pub struct Health {
     pub latency: LatencyHistogram,
     /// Text of the current tracks (console `tracks`), refreshed at the output rate.
     pub tracks_text: String,
+    /// The recorder (black box, snapshots).
+    pub record: RecordHealth,
+}
+
+/// State of the recorder (docs/recording.md), shown by the console `record` and `counters`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RecordHealth {
+    /// The recorder runs (`record.enabled` and a state directory).
+    pub active: bool,
+    /// Frames written to the ring.
+    pub frames_written: u64,
+    /// Frames handed to the recorder and not written: its queue was full, or the disk failed.
+    pub frames_dropped: u64,
+    /// Bytes in the ring now.
+    pub ring_bytes: u64,
+    /// Frames in the ring now.
+    pub ring_frames: u64,
+    /// Write errors (disk full, read-only, ...).
+    pub write_errors: u64,
+    /// Recording is paused after a write error (retried later); the outputs are unaffected.
+    pub disk_fault: bool,
+    /// Frozen recordings written.
+    pub saved: u64,
+    /// The last frozen recording or snapshot written, or the last error.
+    pub last: String,
+    /// Snapshots written.
+    pub snapshots: u64,
+}
+
+/// Requests from the console to the service (the console never calls the service directly): the
+/// service's threads poll this mailbox.
+#[derive(Debug, Default)]
+pub struct Requests {
+    snap: AtomicBool,
+    save: Mutex<Option<String>>,
+}
+
+impl Requests {
+    /// Asks for a snapshot of the next processed frame (console `snap`).
+    pub fn request_snapshot(&self) {
+        self.snap.store(true, Ordering::SeqCst);
+    }
+    /// Takes a pending snapshot request.
+    pub fn take_snapshot(&self) -> bool {
+        self.snap.swap(false, Ordering::SeqCst)
+    }
+    /// Puts back a snapshot request that could not be served yet.
+    pub fn restore_snapshot(&self) {
+        self.request_snapshot();
+    }
+    /// Asks to freeze the black box under `label` (console `record save`, alarms, faults); a
+    /// pending request is replaced.
+    pub fn request_save(&self, label: &str) {
+        *self.save.lock().unwrap_or_else(|p| p.into_inner()) = Some(label.to_string());
+    }
+    /// Takes a pending freeze request (its label).
+    pub fn take_save(&self) -> Option<String> {
+        self.save.lock().unwrap_or_else(|p| p.into_inner()).take()
+    }
 }
 
 impl Health {
@@ -125,6 +188,7 @@ impl Health {
             feeding: false,
             latency: LatencyHistogram::default(),
             tracks_text: String::new(),
+            record: RecordHealth::default(),
         }
     }
 }
@@ -137,6 +201,8 @@ pub struct Shared {
     log_cap: usize,
     /// The configuration text as loaded (console `config`).
     pub config_text: String,
+    /// Console-to-service requests.
+    pub requests: Requests,
     stopping: AtomicBool,
 }
 
@@ -148,6 +214,7 @@ impl Shared {
             log: Mutex::new(VecDeque::with_capacity(log_lines.max(1))),
             log_cap: log_lines.max(1),
             config_text,
+            requests: Requests::default(),
             stopping: AtomicBool::new(false),
         }
     }

@@ -1,0 +1,164 @@
+//! The on-disk ring of the black box: one JPEG per processed frame in `ring/`, the oldest deleted
+//! so that the ring spans at most `record.ring_s` of frame time and `record.max_disk_mb` of disk.
+//! The per-frame rows (detections, tracks, sample) are small and kept in memory beside it.
+
+use crate::pipeline::{ActivitySample, FrameView};
+use std::collections::VecDeque;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+/// One frame of the ring.
+#[derive(Debug, Clone)]
+pub struct RingEntry {
+    /// Source sequence number.
+    pub seq: u64,
+    /// Frame timestamp, s.
+    pub t: f64,
+    /// Image size, px.
+    pub size: (u32, u32),
+    /// Bytes of the JPEG file.
+    pub bytes: u64,
+    /// What the pipeline produced on it.
+    pub view: FrameView,
+    /// The activity sample computed on it.
+    pub sample: Option<ActivitySample>,
+}
+
+/// The ring: frames on disk, their rows in memory.
+#[derive(Debug)]
+pub struct Ring {
+    dir: PathBuf,
+    entries: VecDeque<RingEntry>,
+    bytes: u64,
+    max_bytes: u64,
+    span_s: f64,
+}
+
+impl Ring {
+    /// Opens (creates) `dir` and empties it of an earlier run's frames (their rows are gone).
+    pub fn open(dir: &Path, span_s: f64, max_bytes: u64) -> std::io::Result<Self> {
+        std::fs::create_dir_all(dir)?;
+        for e in std::fs::read_dir(dir)?.flatten() {
+            if e.path().extension().is_some_and(|x| x == "jpg") {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+        Ok(Self { dir: dir.to_path_buf(), entries: VecDeque::new(), bytes: 0, max_bytes, span_s })
+    }
+
+    /// The file of frame `seq`.
+    pub fn path(&self, seq: u64) -> PathBuf {
+        self.dir.join(format!("{seq:012}.jpg"))
+    }
+
+    /// Writes one frame (`jpeg`: its bytes) and trims the ring. Time going backwards (a camera
+    /// restart) starts the ring afresh. A failed write leaves no partial file.
+    pub fn push(&mut self, mut entry: RingEntry, jpeg: &[u8]) -> std::io::Result<()> {
+        if self.entries.back().is_some_and(|b| entry.t <= b.t || entry.seq <= b.seq) {
+            self.clear();
+        }
+        let path = self.path(entry.seq);
+        let written = std::fs::File::create(&path).and_then(|mut f| f.write_all(jpeg));
+        if let Err(e) = written {
+            let _ = std::fs::remove_file(&path);
+            return Err(e);
+        }
+        entry.bytes = jpeg.len() as u64;
+        self.bytes += entry.bytes;
+        self.entries.push_back(entry);
+        self.trim();
+        Ok(())
+    }
+
+    fn trim(&mut self) {
+        let newest = self.entries.back().map_or(f64::NAN, |e| e.t);
+        while let Some(front) = self.entries.front() {
+            let too_old = newest - front.t > self.span_s;
+            if !(too_old || self.bytes > self.max_bytes) || self.entries.len() == 1 {
+                break;
+            }
+            self.pop_front();
+        }
+    }
+
+    fn pop_front(&mut self) {
+        if let Some(e) = self.entries.pop_front() {
+            self.bytes -= e.bytes;
+            let _ = std::fs::remove_file(self.path(e.seq));
+        }
+    }
+
+    /// Deletes every frame.
+    pub fn clear(&mut self) {
+        while !self.entries.is_empty() {
+            self.pop_front();
+        }
+    }
+
+    /// The frames, oldest first.
+    pub fn entries(&self) -> &VecDeque<RingEntry> {
+        &self.entries
+    }
+
+    /// Bytes on disk.
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entry(seq: u64, t: f64) -> RingEntry {
+        RingEntry { seq, t, size: (4, 4), bytes: 0, view: FrameView::default(), sample: None }
+    }
+
+    fn files(dir: &Path) -> usize {
+        std::fs::read_dir(dir).map(|d| d.count()).unwrap_or(0)
+    }
+
+    #[test]
+    fn bounded_by_time() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut r = Ring::open(dir.path(), 1.0, 1 << 30).expect("open");
+        for i in 0..100u64 {
+            r.push(entry(i, i as f64 / 30.0), &[0u8; 100]).expect("push");
+        }
+        // 1 s at 30 frames/s: the newest frame and the 30 before it.
+        assert_eq!(r.entries().len(), 31);
+        assert_eq!(files(dir.path()), 31);
+        assert_eq!(r.entries().front().map(|e| e.seq), Some(69));
+        assert_eq!(r.bytes(), 3100);
+    }
+
+    #[test]
+    fn bounded_by_size() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut r = Ring::open(dir.path(), 1e9, 10_000).expect("open");
+        for i in 0..100u64 {
+            r.push(entry(i, i as f64), &vec![7u8; 1000]).expect("push");
+        }
+        assert_eq!(r.entries().len(), 10);
+        assert!(r.bytes() <= 10_000);
+        let on_disk: u64 = std::fs::read_dir(dir.path())
+            .expect("dir")
+            .flatten()
+            .map(|e| e.metadata().map(|m| m.len()).unwrap_or(0))
+            .sum();
+        assert_eq!(on_disk, r.bytes());
+        assert_eq!(r.entries().front().map(|e| e.seq), Some(90));
+    }
+
+    #[test]
+    fn restart_and_old_files_cleared() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::write(dir.path().join("000000000001.jpg"), b"old").expect("write");
+        let mut r = Ring::open(dir.path(), 10.0, 1 << 20).expect("open");
+        assert_eq!(files(dir.path()), 0);
+        r.push(entry(5, 5.0), b"a").expect("push");
+        r.push(entry(6, 1.0), b"b").expect("push");
+        assert_eq!(r.entries().len(), 1);
+        assert_eq!(files(dir.path()), 1);
+    }
+}
