@@ -26,6 +26,8 @@ enum Command {
     Tune(cli::tune::TuneArgs),
     /// Run the edge daemon: camera or recording in, PLC and serial out.
     Run(cli::run::RunArgs),
+    /// Write one snapshot (frame with overlays + metric depth map) from the configured source.
+    Snapshot(cli::snapshot::SnapshotArgs),
     /// Check a configuration file or show the effective configuration.
     Config(cli::config::ConfigCmdArgs),
 }
@@ -45,6 +47,7 @@ fn main() -> ExitCode {
         Command::Track(a) => cli::track::run(a),
         Command::Tune(a) => cli::tune::run(a),
         Command::Run(a) => cli::run::run(a),
+        Command::Snapshot(a) => cli::snapshot::run(a),
         Command::Config(a) => cli::config::run(a),
     };
     match result {

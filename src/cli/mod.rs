@@ -4,6 +4,7 @@
 pub mod config;
 pub mod eval;
 pub mod run;
+pub mod snapshot;
 pub mod synth;
 pub mod track;
 pub mod tune;

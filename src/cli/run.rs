@@ -75,7 +75,7 @@ pub fn effective_config(args: &RunArgs) -> anyhow::Result<(Config, String)> {
 
 /// Opens the frame source. A missing camera is not fatal (it is retried with backoff and reported
 /// in the status registers: cameras enumerate late after power-up); a missing recording is.
-fn open_source(cfg: &Config) -> anyhow::Result<Box<dyn FrameSource>> {
+pub fn open_source(cfg: &Config) -> anyhow::Result<Box<dyn FrameSource>> {
     let path = &cfg.source.path;
     if path.starts_with("/dev") {
         let mut cam = V4l2Source::new(cfg.source.clone());
