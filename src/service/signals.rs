@@ -5,7 +5,9 @@
 //! - SIGTERM, SIGINT: a stop that was asked for (exit 0).
 //! - SIGHUP: does not stop fme. The calibration file is checked again and the result logged (journal
 //!   and console `log`); applying a changed calibration needs a restart (`systemctl restart fme`).
-//! - SIGQUIT, SIGUSR1, SIGUSR2, SIGALRM, SIGVTALRM, SIGPROF, SIGXCPU, SIGXFSZ, SIGIO, SIGPWR,
+//! - SIGXFSZ (a file grew past the file-size limit) is ignored: the write fails with `EFBIG`
+//!   instead, and the recorder pauses like on a full disk (docs/recording.md); the outputs go on.
+//! - SIGQUIT, SIGUSR1, SIGUSR2, SIGALRM, SIGVTALRM, SIGPROF, SIGXCPU, SIGIO, SIGPWR,
 //!   SIGSTKFLT and the real-time signals: a stop nobody asked fme for; it shuts down cleanly and
 //!   exits 1, so that systemd's `Restart=on-failure` starts it again.
 //! - SIGPIPE stays ignored (the Rust runtime ignores it; a closed socket is an `EPIPE` error).
@@ -33,7 +35,6 @@ const UNEXPECTED: &[(i32, &str)] = &[
     (libc_sig::SIGVTALRM, "SIGVTALRM"),
     (libc_sig::SIGPROF, "SIGPROF"),
     (libc_sig::SIGXCPU, "SIGXCPU"),
-    (libc_sig::SIGXFSZ, "SIGXFSZ"),
     (libc_sig::SIGIO, "SIGIO"),
     (libc_sig::SIGPWR, "SIGPWR"),
     (libc_sig::SIGSTKFLT, "SIGSTKFLT"),
@@ -50,7 +51,6 @@ mod libc_sig {
     pub const SIGTERM: i32 = 15;
     pub const SIGSTKFLT: i32 = 16;
     pub const SIGXCPU: i32 = 24;
-    pub const SIGXFSZ: i32 = 25;
     pub const SIGVTALRM: i32 = 26;
     pub const SIGPROF: i32 = 27;
     pub const SIGIO: i32 = 29;
@@ -70,6 +70,8 @@ impl Signals {
     /// Installs the handlers (inside a tokio runtime). From this call on none of these signals
     /// ends the process by itself.
     pub fn install() -> std::io::Result<Self> {
+        // SAFETY: setting a signal's disposition to SIG_IGN has no preconditions.
+        unsafe { libc::signal(libc::SIGXFSZ, libc::SIG_IGN) };
         let (tx, rx) = mpsc::unbounded_channel();
         let mut kinds: Vec<(i32, SignalEvent)> = vec![
             (libc_sig::SIGHUP, SignalEvent::Hangup),
