@@ -8,6 +8,9 @@
 //!
 //! Environment: `FME_BENCH_REALTIME_S` (default 20), `FME_BENCH_FAST_FRAMES` (default 20000),
 //! `FME_BENCH_THREADS` (both networks' intra-op threads; default the config's 1), `FME_BENCH_SPIN=1`.
+//! `FME_BENCH_RECORD=1`: the real-time phase alternately without and with the black box
+//! (`[record]` defaults), `FME_BENCH_RECORD_ROUNDS` (default 2) times each, with the cost as ratios
+//! and the disk use per hour (docs/recording.md); `FME_BENCH_FAST_FRAMES=0` skips the fast phase.
 //! Run without `--bench` (as `cargo test --all-targets` does) it only smoke-runs: 3 s and 300 frames.
 
 use fme::capture::{FrameSource, RecordedSource};
@@ -55,16 +58,24 @@ fn env_num(key: &str, default: u64) -> u64 {
     std::env::var(key).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
 }
 
-#[tokio::main(flavor = "current_thread")]
-async fn main() {
-    let seq = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/swarm20");
-    println!("daemon bench: {} (120 frames, 640x384, 30 fps), pipeline = service::build_pipeline", seq.display());
+/// One real-time run's figures.
+struct Realtime {
+    line: String,
+    cpu_pct: f64,
+    p50_ms: f64,
+    p99_ms: f64,
+    ring_bytes: u64,
+    frames_in_ring: u64,
+}
 
-    // Phase 1: real time, looping, PLC polling the registers every 100 ms.
-    let bench_mode = std::env::args().any(|a| a == "--bench");
-    let secs = env_num("FME_BENCH_REALTIME_S", if bench_mode { 20 } else { 3 });
-    let cfg = config(&seq);
-    let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(&seq, true, true).expect("open"));
+/// Phase 1: `secs` of real-time replay with a polling PLC; `state`: record into this state directory.
+async fn realtime(seq: &Path, secs: u64, state: Option<&Path>) -> Realtime {
+    let mut cfg = config(seq);
+    match state {
+        Some(dir) => cfg.service.state_dir = dir.to_path_buf(),
+        None => cfg.record.enabled = false,
+    }
+    let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(seq, true, true).expect("open"));
     let pipe = service::build_pipeline(&cfg).expect("pipeline");
     let daemon = Daemon::start(cfg, String::new(), src, pipe, RunOptions::default()).await.expect("start");
     let shared = daemon.shared().clone();
@@ -86,10 +97,11 @@ async fn main() {
     let hh = shared.health();
     let (d0, p0, c0, w0) = warm.expect("warm-up passed");
     let span = w0.elapsed().as_secs_f64();
-    println!(
+    let cpu_pct = 100.0 * (cpu_seconds() - c0) / span;
+    let line = format!(
         "realtime {secs} s: captured {} processed {} dropped after {}s warm-up: {} (total {}); processed {:.1} fps; \
-         latency frame->register p50 {:?} ms p99 {:?} ms max {:.1} ms over {} updates; cpu {:.0}% of one core; \
-         rss {} kB (peak {} kB); plc polls ok {polls}",
+         latency frame->register p50 {:?} ms p99 {:?} ms max {:.1} ms over {} updates; cpu {cpu_pct:.0}% of one core; \
+         rss {} kB (peak {} kB); plc polls ok {polls}; recorder written {} dropped {} ring {} frames {} bytes",
         hh.frames_captured,
         hh.frames_processed,
         warmup.as_secs(),
@@ -100,14 +112,82 @@ async fn main() {
         hh.latency.quantile_ms(0.99),
         hh.latency.max_ms(),
         hh.latency.count(),
-        100.0 * (cpu_seconds() - c0) / span,
         proc_status_kb("VmRSS:"),
         proc_status_kb("VmHWM:"),
+        hh.record.frames_written,
+        hh.record.frames_dropped,
+        hh.record.ring_frames,
+        hh.record.ring_bytes,
     );
     daemon.shutdown().await;
+    Realtime {
+        line,
+        cpu_pct,
+        p50_ms: hh.latency.quantile_ms(0.5).unwrap_or(f64::NAN),
+        p99_ms: hh.latency.quantile_ms(0.99).unwrap_or(f64::NAN),
+        ring_bytes: hh.record.ring_bytes,
+        frames_in_ring: hh.record.ring_frames,
+    }
+}
+
+#[tokio::main(flavor = "current_thread")]
+async fn main() {
+    let seq = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/swarm20");
+    println!("daemon bench: {} (120 frames, 640x384, 30 fps), pipeline = service::build_pipeline", seq.display());
+
+    // Phase 1: real time, looping, PLC polling the registers every 100 ms. FME_BENCH_RECORD=1: the
+    // same run alternately without and with the black box ([record] defaults, a temporary state
+    // directory), FME_BENCH_RECORD_ROUNDS (default 2) times each, and the ratios.
+    let bench_mode = std::env::args().any(|a| a == "--bench");
+    let secs = env_num("FME_BENCH_REALTIME_S", if bench_mode { 20 } else { 3 });
+    if env_num("FME_BENCH_RECORD", 0) == 1 {
+        let rounds = env_num("FME_BENCH_RECORD_ROUNDS", 2);
+        let mut sums = [[0.0f64; 3]; 2];
+        let mut bytes_per_frame = 0.0;
+        for round in 0..rounds {
+            for (i, record) in [false, true].into_iter().enumerate() {
+                let state = tempfile::tempdir().expect("tempdir");
+                let r = realtime(&seq, secs, record.then_some(state.path())).await;
+                println!("round {round} record {record}: {}", r.line);
+                for (k, v) in [r.cpu_pct, r.p50_ms, r.p99_ms].into_iter().enumerate() {
+                    sums[i][k] += v;
+                }
+                if record && r.frames_in_ring > 0 {
+                    bytes_per_frame = r.ring_bytes as f64 / r.frames_in_ring as f64;
+                }
+            }
+        }
+        let n = rounds.max(1) as f64;
+        let [off, on] = sums.map(|s| s.map(|v| v / n));
+        println!(
+            "record cost over {rounds} rounds of {secs} s: cpu {:.1}% -> {:.1}% of one core (x{:.3}); latency p50 {:.0} -> {:.0} ms (x{:.3}), p99 {:.0} -> {:.0} ms (x{:.3})",
+            off[0],
+            on[0],
+            on[0] / off[0],
+            off[1],
+            on[1],
+            on[1] / off[1],
+            off[2],
+            on[2],
+            on[2] / off[2]
+        );
+        let d = fme::config::RecordConfig::default();
+        println!(
+            "disk: {bytes_per_frame:.0} bytes/frame; at 30 fps the ring writes {:.2} GB/hour and holds {:.0} MB (ring_s {} s, cap {} MB)",
+            bytes_per_frame * 30.0 * 3600.0 / 1e9,
+            (bytes_per_frame * 30.0 * d.ring_s / 1e6).min(d.max_disk_mb as f64),
+            d.ring_s,
+            d.max_disk_mb
+        );
+    } else {
+        println!("{}", realtime(&seq, secs, None).await.line);
+    }
 
     // Phase 2: as fast as possible, many frames, memory sampled along the way.
     let n = env_num("FME_BENCH_FAST_FRAMES", if bench_mode { 20_000 } else { 300 });
+    if n == 0 {
+        return;
+    }
     let mut cfg = config(&seq);
     cfg.source.realtime = false;
     let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(&seq, false, true).expect("open"));
