@@ -1,10 +1,12 @@
-//! The serial field-diagnostics console (line based, case-insensitive, read-only).
+//! The serial field-diagnostics console (line based, case-insensitive; it changes nothing, only
+//! `snap` and `record save` ask the service, through [`crate::status::Requests`], to write files).
 //!
 //! Works with picocom/screen at 115200 baud. Every reply ends with a line `OK` or `ERR <reason>`, so
 //! scripts can parse it. Garbage, over-long lines and binary noise get an `ERR` line and never stop
 //! the daemon. Output never blocks the console ([`writer`]): a terminal that stops reading loses
 //! output (counted: `console-output-dropped`), never its input. Commands: `help`, `status`, `version`, `activity`, `tracks`, `calib`, `regs`,
-//! `counters`, `log [n]`, `stream on|off`, `config`.
+//! `counters`, `log [n]`, `stream on|off`, `config`, `snap`, `record`, `record save [label]`
+//! (docs/recording.md).
 
 pub mod writer;
 
