@@ -517,6 +517,32 @@ mod tests {
     }
 
     #[test]
+    fn snap_and_record_save_go_through_the_mailbox() {
+        let s = shared();
+        let mut sess = Session::default();
+        let mut out = String::new();
+        sess.feed(b"record save storm
+", &s.0, &s.1, &mut out);
+        assert!(out.starts_with("ERR no black box"), "{out}");
+        assert_eq!(s.0.requests.take_save(), None);
+        s.0.with_health(|h| h.record.active = true);
+        out.clear();
+        sess.feed(b"SNAP
+record save Storm
+record save
+record save a b
+record
+", &s.0, &s.1, &mut out);
+        assert!(s.0.requests.take_snapshot());
+        assert_eq!(s.0.requests.take_save().as_deref(), Some("manual"), "the latest request wins");
+        assert!(out.contains("ERR usage: record save [label]"), "{out}");
+        assert!(out.contains("ring on") && out.contains("disk ok"), "{out}");
+        sess.feed(b"record save storm
+", &s.0, &s.1, &mut out);
+        assert_eq!(s.0.requests.take_save().as_deref(), Some("storm"));
+    }
+
+    #[test]
     fn stream_and_config() {
         let s = shared();
         let mut sess = Session::default();
