@@ -16,8 +16,9 @@ pub struct SnapshotArgs {
     /// Frame source (`--set source.path=...`).
     #[arg(long)]
     pub source: Option<PathBuf>,
-    /// Frames run through the pipeline before the snapshot (so tracks and a depth fit exist).
-    #[arg(long, default_value_t = 30)]
+    /// Frames run through the pipeline before the snapshot (so tracks, a depth fit and an activity
+    /// value exist: the mean needs about a second of tracking).
+    #[arg(long, default_value_t = 90)]
     pub frames: u32,
     /// Write into this folder instead of `<state directory>/snapshots/`.
     #[arg(long)]

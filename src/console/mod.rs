@@ -521,24 +521,39 @@ mod tests {
         let s = shared();
         let mut sess = Session::default();
         let mut out = String::new();
-        sess.feed(b"record save storm
-", &s.0, &s.1, &mut out);
+        sess.feed(
+            b"record save storm
+",
+            &s.0,
+            &s.1,
+            &mut out,
+        );
         assert!(out.starts_with("ERR no black box"), "{out}");
         assert_eq!(s.0.requests.take_save(), None);
         s.0.with_health(|h| h.record.active = true);
         out.clear();
-        sess.feed(b"SNAP
+        sess.feed(
+            b"SNAP
 record save Storm
 record save
 record save a b
 record
-", &s.0, &s.1, &mut out);
+",
+            &s.0,
+            &s.1,
+            &mut out,
+        );
         assert!(s.0.requests.take_snapshot());
         assert_eq!(s.0.requests.take_save().as_deref(), Some("manual"), "the latest request wins");
         assert!(out.contains("ERR usage: record save [label]"), "{out}");
         assert!(out.contains("ring on") && out.contains("disk ok"), "{out}");
-        sess.feed(b"record save storm
-", &s.0, &s.1, &mut out);
+        sess.feed(
+            b"record save storm
+",
+            &s.0,
+            &s.1,
+            &mut out,
+        );
         assert_eq!(s.0.requests.take_save().as_deref(), Some("storm"));
     }
 
