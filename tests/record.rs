@@ -40,6 +40,8 @@ async fn frozen_recording_replays_to_the_recorded_series() {
         "service.systemd_notify=false".into(),
         format!("service.state_dir=\"{}\"", state.display()),
         "record.ring_s=1000.0".into(),
+        "record.snapshot_every_s=1.0".into(),
+        "record.keep_snapshots=2".into(),
     ]
     .into();
     let (cfg, text) = Config::load_with(Some(Path::new("config/fme.toml")), &sets).expect("config");
@@ -69,6 +71,16 @@ async fn frozen_recording_replays_to_the_recorded_series() {
         assert!(rec.join(f).is_file(), "{f} missing in {}", rec.display());
     }
     assert!(!rec.join("img1/000121.jpg").exists());
+    // A snapshot every second of frame time over 4 s, the newest 2 kept: a JPEG and a depth PNG each.
+    assert!(h.record.snapshots >= 3, "{:?}", h.record);
+    let mut snaps: Vec<String> = std::fs::read_dir(state.join("snapshots"))
+        .expect("snapshots")
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    snaps.sort();
+    assert_eq!(snaps.len(), 4, "{snaps:?}");
+    assert!(snaps[0].ends_with("-depth.png") && snaps[1].ends_with(".jpg"), "{snaps:?}");
     let recorded = std::fs::read_to_string(rec.join("series.csv")).expect("recorded series");
     assert_eq!(recorded, std::fs::read_to_string(&live).expect("live series"), "recorded = live --series");
 
@@ -147,4 +159,26 @@ async fn disk_full_pauses_recording_and_the_plc_values_keep_updating() {
     assert_ne!(bits & status::CAMERA_OK, 0, "status {bits:#06x}");
     assert_eq!(log.matches("recording paused").count(), 1, "logged once:\n{log}");
     assert!(out.status.success(), "clean exit on SIGTERM: {:?}\n{log}", out.status);
+}
+
+/// `fme snapshot` writes the overlay JPEG and the depth PNG once; without a folder it exits 2.
+#[test]
+fn fme_snapshot_writes_the_frame_and_the_depth_map() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let out = fme()
+        .args(["snapshot", "--source", SEQ, "--frames", "60", "--out"])
+        .arg(tmp.path())
+        .output()
+        .expect("run fme snapshot");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let jpg = PathBuf::from(String::from_utf8_lossy(&out.stdout).trim());
+    assert!(jpg.starts_with(tmp.path()) && jpg.extension().is_some_and(|x| x == "jpg"), "{jpg:?}");
+    let img = image::open(&jpg).expect("jpeg");
+    assert_eq!((img.width(), img.height()), (640, 384));
+    let png = PathBuf::from(jpg.to_string_lossy().replace(".jpg", "-depth.png"));
+    let depth = image::open(&png).expect("depth png").to_rgb8();
+    assert!(depth.pixels().any(|p| p.0[0] > 200) && depth.pixels().any(|p| p.0[2] > 200), "near and far");
+    let out = fme().args(["snapshot", "--source", SEQ]).output().expect("run fme snapshot");
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("service.state_dir"));
 }

@@ -257,6 +257,11 @@ impl Recorder {
                     }
                 }
                 if let Some(label) = sh.requests.take_save() {
+                    // Everything handed over before the request goes into the recording.
+                    while let Ok(mut r) = rx.try_recv() {
+                        w.handle(&mut r);
+                        let _ = pool_tx.try_send(r);
+                    }
                     w.save(&label);
                 }
                 if sh.stopping() {
