@@ -7,6 +7,7 @@
 //! | module | stage | paper |
 //! |---|---|---|
 //! | [`geometry`], [`units`] | pixel / camera / world frames, metres, seconds, m/s | sec. 3.1, Fig. 2 |
+//! | [`calib`] | camera pose (and intrinsics) from measured reference objects: `fme calibrate` | eq. 1-2 |
 //! | [`sequence`] | MOTChallenge sequences with fme's ground-truth extras | sec. 4.1 |
 //! | [`synth`] | synthetic underwater scenes with exact ground truth | sec. 4.1, 4.4 |
 //! | [`infer`] | ONNX detector and relative-depth networks, reduced-rate scheduling | sec. 4.2, 4.3 |
@@ -26,6 +27,7 @@
 #![warn(missing_docs)]
 
 pub mod assign;
+pub mod calib;
 pub mod capture;
 pub mod cli;
 pub mod config;
