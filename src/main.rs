@@ -28,6 +28,8 @@ enum Command {
     Run(cli::run::RunArgs),
     /// Check a configuration file or show the effective configuration.
     Config(cli::config::ConfigCmdArgs),
+    /// Solve the camera calibration from measured reference objects, or check it (--check).
+    Calibrate(cli::calibrate::CalibrateArgs),
 }
 
 fn main() -> ExitCode {
@@ -46,6 +48,7 @@ fn main() -> ExitCode {
         Command::Tune(a) => cli::tune::run(a),
         Command::Run(a) => cli::run::run(a),
         Command::Config(a) => cli::config::run(a),
+        Command::Calibrate(a) => cli::calibrate::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

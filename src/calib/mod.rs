@@ -259,7 +259,7 @@ fn non_coplanarity(w: &[Vector3<f64>]) -> f64 {
 }
 
 /// Solves without the consensus step: linear start, then Levenberg-Marquardt.
-fn solve_once(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Options) -> Result<Solution, CalibError> {
+fn solve_once(refs: &[Reference], intrinsics: Option<&Intrinsics>) -> Result<Solution, CalibError> {
     let w: Vec<Vector3<f64>> = refs.iter().map(|r| r.world.0).collect();
     let px: Vec<Pixel> = refs.iter().map(|r| r.pixel).collect();
     let spread = non_coplanarity(&w);
@@ -294,7 +294,6 @@ fn solve_once(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Option
             (cam, "dlt", true)
         }
     };
-    let _ = opts;
     let camera = pnp::refine(&start_cam, &w, &px, estimate_k);
     camera.intrinsics.validate().map_err(|e| CalibError::NoSolution(e.to_string()))?;
     let (residuals, rms_px) = residuals(&camera, refs);
@@ -306,7 +305,7 @@ fn solve_once(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Option
 /// `fx = fy`, `cx`, `cy` as well (six or more non-coplanar references).
 pub fn calibrate(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Options) -> Result<Solution, CalibError> {
     check_geometry(refs, opts)?;
-    let sol = solve_once(refs, intrinsics, opts)?;
+    let sol = solve_once(refs, intrinsics)?;
     if let Some(e) = consensus(refs, &sol, opts) {
         return Err(e);
     }
