@@ -309,7 +309,7 @@ pub fn calibrate(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Opt
     if let Some(e) = consensus(refs, &sol, opts) {
         return Err(e);
     }
-    if !(sol.rms_px <= opts.max_rms_px) {
+    if sol.rms_px.is_nan() || sol.rms_px > opts.max_rms_px {
         let (i, worst) = sol
             .residuals
             .iter()

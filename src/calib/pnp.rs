@@ -101,7 +101,7 @@ pub fn pose_from_normalised_dlt(p: &Matrix3x4<f64>) -> Option<Pose> {
     let m = p.fixed_view::<3, 3>(0, 0).into_owned();
     let r = nearest_rotation(&m)?;
     let scale = m.svd(false, false).singular_values.mean();
-    if !(scale > 1e-12) {
+    if scale.is_nan() || scale <= 1e-12 {
         return None;
     }
     let t = p.column(3).into_owned() / scale;
@@ -130,7 +130,7 @@ pub fn camera_from_pixel_dlt(p: &Matrix3x4<f64>) -> Option<Camera> {
         return None;
     }
     let lambda = k[(2, 2)];
-    if !(lambda.abs() > 1e-12) {
+    if lambda.is_nan() || lambda.abs() <= 1e-12 {
         return None;
     }
     let kn = k / lambda;
