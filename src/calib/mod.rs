@@ -4,7 +4,7 @@
 //! reads (docs/calibration.md), with the reference objects the metric depth fit uses (paper eq. 1-2).
 //!
 //! Method (see [`pnp`]): a linear start (normalised DLT for six or more non-coplanar references, a
-//! plane homography otherwise), Levenberg-Marquardt on the reprojection error in pixels, then a
+//! plane homography otherwise, with sampled rotations as a fallback), Levenberg-Marquardt on the reprojection error in pixels, then a
 //! leave-one-out consensus step: each reference is predicted by the pose solved from all the others;
 //! a reference whose prediction misses by more than twice the error limit while the others fit is
 //! named as mis-measured. This is the single-outlier case of RANSAC's consensus test (Fischler &
@@ -181,7 +181,7 @@ pub struct Solution {
     pub rms_px: f64,
     /// True when fx = fy, cx, cy were estimated (no intrinsics given).
     pub estimated_intrinsics: bool,
-    /// Which linear start was used (`dlt` or `plane homography`).
+    /// Which start the solution came from (`dlt`, `plane homography` or `sampled rotations`).
     pub start: &'static str,
 }
 
@@ -294,7 +294,23 @@ fn solve_once(refs: &[Reference], intrinsics: Option<&Intrinsics>) -> Result<Sol
             (cam, "dlt", true)
         }
     };
-    let camera = pnp::refine(&start_cam, &w, &px, estimate_k);
+    let mut camera = pnp::refine(&start_cam, &w, &px, estimate_k);
+    let (_, mut rms_px) = residuals(&camera, refs);
+    let mut start = start;
+    // Few references off a plane (no exact linear start), or a start that did not reach the data:
+    // also refine from sampled rotations and keep the best (an outlier makes this run; it is cheap).
+    if let (Some(k), true) = (intrinsics, start != "dlt" || rms_px > 1.0) {
+        let norm: Vec<(f64, f64)> = px.iter().map(|p| k.undistort((p.u - k.cx) / k.fx, (p.v - k.cy) / k.fy)).collect();
+        for pose in pnp::sampled_starts(&w, &norm, 2000, 8) {
+            let c = pnp::refine(&Camera { intrinsics: *k, pose }, &w, &px, false);
+            let (_, r) = residuals(&c, refs);
+            if r < rms_px {
+                camera = c;
+                rms_px = r;
+                start = "sampled rotations";
+            }
+        }
+    }
     camera.intrinsics.validate().map_err(|e| CalibError::NoSolution(e.to_string()))?;
     let (residuals, rms_px) = residuals(&camera, refs);
     Ok(Solution { camera, residuals, rms_px, estimated_intrinsics: estimate_k, start })

@@ -10,6 +10,8 @@
 //! - [`planar`]: a homography from the points' best-fit plane to normalised coordinates, decomposed
 //!   into a pose (Zhang, "A flexible new technique for camera calibration", PAMI 2000, sec. 3.1);
 //!   exact for coplanar points, an approximate start for four or five points that are not.
+//! - [`sampled_starts`]: rotation sampling with the translation solved linearly, the fallback start
+//!   when the others do not reach the data (few points off a plane).
 //! - [`refine`]: Levenberg-Marquardt (Marquardt 1963; H&Z appendix A6.2) on the reprojection error
 //!   in pixels through [`Intrinsics::project`] (distortion included). The rotation is updated by a
 //!   local axis-angle increment `R <- exp([w]x) R`, so there is no singularity at any attitude.
@@ -208,6 +210,54 @@ pub fn planar(world: &[Vector3<f64>], img: &[(f64, f64)]) -> Option<Pose> {
     // p_cam = Rp B^T (p - c) + tp  =>  R = Rp B^T, t = tp - R c.
     let r = rp * basis.transpose();
     Pose::new(r, tp - r * c).ok()
+}
+
+/// Starting poses by rotation sampling, for when the linear starts do not apply (four or five
+/// references that are not coplanar): for each of `count` seeded uniformly random rotations (unit
+/// quaternions from four normal deviates, Shoemake 1992) the translation follows linearly from
+/// `x_i (r3 X_i + t_z) = r1 X_i + t_x`, `y_i (r3 X_i + t_z) = r2 X_i + t_y` (least squares); the `keep`
+/// rotations with every point in front and the smallest error in normalised coordinates are
+/// returned, best first, for [`refine`] to finish.
+pub fn sampled_starts(world: &[Vector3<f64>], img: &[(f64, f64)], count: usize, keep: usize) -> Vec<Pose> {
+    let mut rng = crate::rng::Rng::new(0x0ca1_1b7a);
+    let mut best: Vec<(f64, Pose)> = Vec::with_capacity(keep + 1);
+    for _ in 0..count {
+        let q = nalgebra::Quaternion::new(rng.normal(), rng.normal(), rng.normal(), rng.normal());
+        let Some(uq) = nalgebra::UnitQuaternion::try_new(q, 1e-9) else { continue };
+        let r = uq.to_rotation_matrix().into_inner();
+        let mut ata = Matrix3::<f64>::zeros();
+        let mut atb = Vector3::<f64>::zeros();
+        for (w, &(x, y)) in world.iter().zip(img) {
+            let rw = r * w;
+            // Rows [1, 0, -x] . t = x rw.z - rw.x and [0, 1, -y] . t = y rw.z - rw.y.
+            for (row, b) in
+                [(Vector3::new(1.0, 0.0, -x), x * rw.z - rw.x), (Vector3::new(0.0, 1.0, -y), y * rw.z - rw.y)]
+            {
+                ata += row * row.transpose();
+                atb += row * b;
+            }
+        }
+        let Some(t) = ata.try_inverse().map(|inv| inv * atb) else { continue };
+        let mut cost = 0.0;
+        let mut front = true;
+        for (w, &(x, y)) in world.iter().zip(img) {
+            let c = r * w + t;
+            if c.z <= 1e-6 {
+                front = false;
+                break;
+            }
+            cost += (c.x / c.z - x).powi(2) + (c.y / c.z - y).powi(2);
+        }
+        if !front || !cost.is_finite() {
+            continue;
+        }
+        if best.len() < keep || cost < best[best.len() - 1].0 {
+            best.push((cost, Pose { rotation: r, translation: t }));
+            best.sort_by(|a, b| a.0.total_cmp(&b.0));
+            best.truncate(keep);
+        }
+    }
+    best.into_iter().map(|(_, p)| p).collect()
 }
 
 /// Pixel residuals `projected - measured` (u then v per point); a point behind the camera costs a
