@@ -252,6 +252,12 @@ fn bad_input_exits_2_naming_the_problem() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("non-coplanar") && err.contains("--intrinsics"), "{err}");
+    // A camera that is not there (--source grabs the frame from a V4L2 device).
+    let o =
+        fme(&["calibrate", "--source", "/dev/video-fme-none", "--frame", dir.path().join("g.png").to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("/dev/video-fme-none") && err.contains("not found"), "{err}");
     // Malformed CSV: the line is named.
     let bad = dir.path().join("bad.csv");
     std::fs::write(&bad, "name,x,y,z,u,v\na,1,2,3,4,5\nb,1,2,3,4\n").unwrap();

@@ -18,13 +18,21 @@ use std::path::{Path, PathBuf};
                         and let six or more non-coplanar references estimate them. See docs/calibration.md.")]
 pub struct CalibrateArgs {
     /// The frame the references were marked on (PNG or JPEG); gives the image size and the overlay's
-    /// background.
+    /// background. With --source: where the grabbed frame is written.
     #[arg(long, value_name = "IMG")]
     pub frame: PathBuf,
+    /// Grab the frame from this V4L2 camera (at `source.width` x `source.height` and
+    /// `source.format` of the configuration: --config, --set) and write it to --frame. Without
+    /// --points, stop there: mark the references on that image, then run again with --frame.
+    #[arg(long, value_name = "/dev/videoN")]
+    pub source: Option<PathBuf>,
+    /// The configuration (only the `source` section is used, with --source).
+    #[command(flatten)]
+    pub config: super::ConfigArgs,
     /// The references: CSV with header `name,x,y,z,u,v` (face centre in world metres, z up; the pixel
     /// where it appears, u right, v down).
-    #[arg(long, value_name = "CSV")]
-    pub points: PathBuf,
+    #[arg(long, value_name = "CSV", required_unless_present = "source")]
+    pub points: Option<PathBuf>,
     /// Intrinsics from any JSON file with a `camera` block (fx, fy, cx, cy, distortion): a calibration
     /// file or a sequence's meta.json. Without it and without --fx.., fx = fy, cx and cy are estimated
     /// (six or more non-coplanar references).
@@ -44,7 +52,7 @@ pub struct CalibrateArgs {
     #[arg(long, requires_all = ["fx", "fy", "cx"])]
     pub cy: Option<f64>,
     /// Where to write the calibration (JSON, the format of a sequence's meta.json).
-    #[arg(long, value_name = "CALIB.json", required_unless_present = "check", conflicts_with = "check")]
+    #[arg(long, value_name = "CALIB.json", required_unless_present_any = ["check", "source"], conflicts_with = "check")]
     pub out: Option<PathBuf>,
     /// Also draw the frame with marked (green crosses) and reprojected (red circles) references and
     /// the world axes (x red, y green, z blue, 1 m from the origin and from the references' centroid) to this PNG.
@@ -132,8 +140,20 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     if !(args.ref_size.is_finite() && args.ref_size >= 0.0) {
         return Err(usage(format!("--ref-size must be 0 or a positive length in metres, got {}", args.ref_size)));
     }
-    let frame = read_frame(&args.frame)?;
-    let refs = read_points(&args.points)?;
+    let frame = match &args.source {
+        Some(dev) => grab(dev, &args.config, &args.frame)?,
+        None => read_frame(&args.frame)?,
+    };
+    let Some(points) = &args.points else {
+        return write_stdout(&format!(
+            "wrote {} ({}x{}); mark the references on it and run fme calibrate --frame {} --points CSV ...\n",
+            args.frame.display(),
+            frame.width(),
+            frame.height(),
+            args.frame.display()
+        ));
+    };
+    let refs = read_points(points)?;
     let opts = Options { max_rms_px: args.max_rms, width: frame.width(), height: frame.height() };
     if let Some(calib_path) = &args.check {
         return check(calib_path, &refs, &opts, &frame, args.overlay.as_deref());
@@ -147,8 +167,8 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
         }
         _ => None,
     };
-    let sol = calib::calibrate(&refs, intrinsics.as_ref(), &opts)
-        .map_err(|e| usage(format!("{}: {e}", args.points.display())))?;
+    let sol =
+        calib::calibrate(&refs, intrinsics.as_ref(), &opts).map_err(|e| usage(format!("{}: {e}", points.display())))?;
     let out = args.out.as_deref().ok_or_else(|| usage("--out is required"))?;
     let cam = sol.camera;
     let centre = cam.pose.camera_center();
@@ -173,7 +193,7 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
         reference_objects,
         calibrate: CalibrateInfo {
             frame: args.frame.display().to_string(),
-            points: args.points.display().to_string(),
+            points: points.display().to_string(),
             names: refs.iter().map(|r| r.name.clone()).collect(),
             rms_px: sol.rms_px,
             max_rms_px: args.max_rms,
@@ -213,6 +233,26 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     );
     let _ = writeln!(s, "wrote {}", out.display());
     write_stdout(&s)
+}
+
+/// Grabs one frame from a V4L2 camera (after a few to let exposure settle) and writes it to `out`.
+fn grab(dev: &Path, config: &super::ConfigArgs, out: &Path) -> anyhow::Result<image::RgbImage> {
+    use crate::capture::{CaptureError, FrameSource, V4l2Source};
+    let (cfg, _) = config.load(&[super::set_text("source.path", &dev.to_string_lossy())])?;
+    let mut cam = V4l2Source::new(cfg.source.clone());
+    cam.reopen().map_err(|e| match e {
+        e @ (CaptureError::NotFound { .. } | CaptureError::Open { .. }) => usage(format!("--source: {e}")),
+        e => anyhow::Error::new(e).context("--source"),
+    })?;
+    let mut f = cam.next_frame(Vec::new()).context("--source: grabbing a frame")?;
+    for _ in 0..5 {
+        f = cam.next_frame(std::mem::take(&mut f.data)).context("--source: grabbing a frame")?;
+    }
+    let mut rgb = Vec::new();
+    let (w, h) = f.to_rgb_into(&mut rgb).map_err(|e| anyhow::anyhow!("--source: decoding the frame: {e}"))?;
+    let img = image::RgbImage::from_raw(w, h, rgb).ok_or_else(|| anyhow::anyhow!("--source: frame size mismatch"))?;
+    img.save(out).with_context(|| format!("writing the grabbed frame to {}", out.display()))?;
+    Ok(img)
 }
 
 /// The per-reference table: reprojection error in pixels and in metres at the reference's depth.
