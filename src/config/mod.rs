@@ -223,10 +223,10 @@ impl Config {
         if let Err(e) = allow::AllowList::parse(&m.allow) {
             return err("output.modbus.allow", e);
         }
-        if self.output.serial.enabled && self.output.serial.baud == 0 {
+        if self.output.serial.baud == 0 {
             return err("output.serial.baud", "must be > 0");
         }
-        if self.console.enabled && self.console.baud == 0 {
+        if self.console.baud == 0 {
             return err("console.baud", "must be > 0");
         }
         if self.console.log_lines == 0 || self.console.log_lines > 10_000 {

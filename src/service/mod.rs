@@ -256,7 +256,8 @@ struct PipelineCtx {
     serial_tx: Option<std::sync::mpsc::SyncSender<String>>,
     output_period_s: f64,
     max_frames: Option<u64>,
-    series: Option<crate::pipeline::SeriesWriter>,
+    series: Option<std::sync::mpsc::SyncSender<crate::pipeline::SeriesRow>>,
+    series_dropped: u64,
     watchdog: Option<Duration>,
     finished: tokio::sync::watch::Sender<bool>,
 }
@@ -293,12 +294,18 @@ fn pipeline_loop(mut c: PipelineCtx) {
         let calib = c.pipeline.calib();
         let sample = match result {
             Ok(s) => {
-                if let (Some(w), Some(sample)) = (c.series.as_mut(), s) {
+                if let (Some(tx), Some(sample)) = (&c.series, s) {
+                    // The writer thread has the disk; the pipeline never waits on it.
                     let row = crate::pipeline::SeriesRow { frame: frame.seq + 1, sample };
-                    if let Err(e) = w.write(&row) {
-                        // Recording the series must never stop the pipeline: stop writing instead.
-                        c.shared.log(Level::ERROR, format!("--series: {e}; no more rows are written"));
-                        c.series = None;
+                    match tx.try_send(row) {
+                        Ok(()) => {}
+                        Err(std::sync::mpsc::TrySendError::Full(_)) => {
+                            c.series_dropped += 1;
+                            if c.series_dropped == 1 || c.series_dropped.is_multiple_of(1000) {
+                                c.shared.log(Level::WARN, format!("--series: {} rows dropped (disk slow)", c.series_dropped));
+                            }
+                        }
+                        Err(std::sync::mpsc::TrySendError::Disconnected(_)) => c.series = None,
                     }
                 }
                 s
@@ -358,9 +365,7 @@ fn pipeline_loop(mut c: PipelineCtx) {
             break;
         }
     }
-    if let Some(Err(e)) = c.series.take().map(crate::pipeline::SeriesWriter::finish) {
-        c.shared.log(Level::ERROR, format!("--series: {e}"));
-    }
+    drop(c.series.take()); // the writer thread drains what is queued and finishes the file
     let _ = c.finished.send(true);
 }
 
@@ -374,7 +379,7 @@ impl Daemon {
         pipeline: Box<dyn Pipeline>,
         opts: RunOptions,
     ) -> Result<Self, ServiceError> {
-        let series = match &opts.series {
+        let series_file = match &opts.series {
             Some(p) => Some(crate::pipeline::SeriesWriter::create(p, "").map_err(ServiceError::Series)?),
             None => None,
         };
@@ -417,6 +422,26 @@ impl Daemon {
                 .map_err(|error| ServiceError::Spawn { what: "capture", error })?,
         );
         let watchdog = if cfg.service.systemd_notify { sd_notify::watchdog_enabled() } else { None };
+        // `--series`: a writer thread with a bounded queue, so the pipeline never waits on the disk.
+        let series = match series_file {
+            Some(mut w) => {
+                let (tx, rx) = std::sync::mpsc::sync_channel::<crate::pipeline::SeriesRow>(4096);
+                let sh = shared.clone();
+                other_threads.push(
+                    std::thread::Builder::new()
+                        .name("fme-series".into())
+                        .spawn(move || {
+                            let result = rx.iter().try_for_each(|row| w.write(&row)).and_then(|()| w.finish());
+                            if let Err(e) = result {
+                                sh.log(Level::ERROR, format!("--series: {e}; no more rows are written"));
+                            }
+                        })
+                        .map_err(|error| ServiceError::Spawn { what: "series writer", error })?,
+                );
+                Some(tx)
+            }
+            None => None,
+        };
         let (finished_tx, finished) = tokio::sync::watch::channel(false);
         let ctx = PipelineCtx {
             pipeline,
@@ -427,6 +452,7 @@ impl Daemon {
             output_period_s: 1.0 / cfg.output.rate_hz,
             max_frames: opts.max_frames,
             series,
+            series_dropped: 0,
             watchdog,
             finished: finished_tx,
         };

@@ -196,6 +196,27 @@ impl Shared {
     }
 }
 
+/// Fault code of register 11: the most severe current problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u16)]
+pub enum FaultCode {
+    /// 0: no fault.
+    #[default]
+    None = 0,
+    /// 1: camera lost or stalled (reconnecting).
+    Camera = 1,
+    /// 2: detector failed.
+    Detector = 2,
+    /// 3: depth network failed.
+    Depth = 3,
+    /// 4: pipeline stalled (no frame processed within `service.stall_after_s`).
+    PipelineStalled = 4,
+    /// 5: PLC link down (client modes).
+    PlcLink = 5,
+    /// 6: the daemon has stopped (final write before exit).
+    Stopped = 6,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -224,25 +245,4 @@ mod tests {
         assert!(l[0].ends_with("m2") && l[2].ends_with("m4"), "{l:?}");
         assert_eq!(s.last_logs(1).len(), 1);
     }
-}
-
-/// Fault code of register 11: the most severe current problem.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[repr(u16)]
-pub enum FaultCode {
-    /// 0: no fault.
-    #[default]
-    None = 0,
-    /// 1: camera lost or stalled (reconnecting).
-    Camera = 1,
-    /// 2: detector failed.
-    Detector = 2,
-    /// 3: depth network failed.
-    Depth = 3,
-    /// 4: pipeline stalled (no frame processed within `service.stall_after_s`).
-    PipelineStalled = 4,
-    /// 5: PLC link down (client modes).
-    PlcLink = 5,
-    /// 6: the daemon has stopped (final write before exit).
-    Stopped = 6,
 }
