@@ -22,7 +22,8 @@ fn shipped_with_tracker_keys() -> String {
         if l.starts_with('[') {
             in_tracker = l.starts_with("[tracker");
         }
-        let key_like = |t: &str| t.split_once(" = ").is_some_and(|(k, _)| k.chars().all(|c| c.is_ascii_lowercase() || c == '_'));
+        let key_like =
+            |t: &str| t.split_once(" = ").is_some_and(|(k, _)| k.chars().all(|c| c.is_ascii_lowercase() || c == '_'));
         match l.strip_prefix("# ") {
             Some(t) if in_tracker && (key_like(t) || t == "[tracker.noise]") => out.push_str(t),
             _ => out.push_str(l),
@@ -82,11 +83,7 @@ fn every_key_in_shipped_config_is_commented() {
         // Walk back over the keys of the same group: the first line above them that is not a key
         // must be the comment that documents them.
         let above = lines[..i].iter().rev().map(|p| p.trim()).find(|p| !is_key(p));
-        assert!(
-            above.is_some_and(|p| p.starts_with('#')),
-            "config/fme.toml line {}: `{t}` has no comment",
-            i + 1
-        );
+        assert!(above.is_some_and(|p| p.starts_with('#')), "config/fme.toml line {}: `{t}` has no comment", i + 1);
     }
 }
 

@@ -302,7 +302,10 @@ fn pipeline_loop(mut c: PipelineCtx) {
                         Err(std::sync::mpsc::TrySendError::Full(_)) => {
                             c.series_dropped += 1;
                             if c.series_dropped == 1 || c.series_dropped.is_multiple_of(1000) {
-                                c.shared.log(Level::WARN, format!("--series: {} rows dropped (disk slow)", c.series_dropped));
+                                c.shared.log(
+                                    Level::WARN,
+                                    format!("--series: {} rows dropped (disk slow)", c.series_dropped),
+                                );
                             }
                         }
                         Err(std::sync::mpsc::TrySendError::Disconnected(_)) => c.series = None,

@@ -221,7 +221,15 @@ impl Patch {
         macro_rules! set {
             ($($k:ident),*) => { $( if let Some(v) = self.$k { c.$k = v; } )* };
         }
-        set!(mode, det_threshold, track_threshold, new_track_threshold, iou_threshold, low_iou_threshold, unconfirmed_iou_threshold);
+        set!(
+            mode,
+            det_threshold,
+            track_threshold,
+            new_track_threshold,
+            iou_threshold,
+            low_iou_threshold,
+            unconfirmed_iou_threshold
+        );
         set!(min_hits, max_age_s, max_age_frames, fuse_score, depth_weight, buffer_rate, buffer_max, noise, max_tracks);
         c.validate()?;
         Ok(c)

@@ -201,7 +201,7 @@ pub fn set_key(cfg: &mut TrackerConfig, key: &str, v: f64) -> Result<(), String>
         Some(toml::Value::Integer(_)) if v >= 0.0 && v.fract() == 0.0 => toml::Value::Integer(v as i64),
         Some(toml::Value::Integer(_)) => return Err(format!("grid key `{key}`: {v} is not a whole number >= 0")),
         Some(toml::Value::Float(_)) => toml::Value::Float(v),
-        _ => return Err(format!("grid key `{key}`: not a numeric [tracker] key")),
+        _ => return Err(format!("unknown grid key `{key}`: not a numeric [tracker] key")),
     };
     table.insert(key.to_string(), value);
     *cfg = toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| format!("grid key `{key}` = {v}: {e}"))?;
@@ -219,10 +219,11 @@ impl Grid {
     /// The paper's Table 1 on our keys: `T_d`, `T_t`, `T_unt`, `T_unc`, `T_iou` in 30%..70%.
     pub fn paper() -> Self {
         let v = vec![0.3, 0.4, 0.5, 0.6, 0.7];
-        let axes = ["det_threshold", "track_threshold", "new_track_threshold", "unconfirmed_iou_threshold", "iou_threshold"]
-            .iter()
-            .map(|k| (k.to_string(), v.clone()))
-            .collect();
+        let axes =
+            ["det_threshold", "track_threshold", "new_track_threshold", "unconfirmed_iou_threshold", "iou_threshold"]
+                .iter()
+                .map(|k| (k.to_string(), v.clone()))
+                .collect();
         Self { axes }
     }
 
