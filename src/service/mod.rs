@@ -5,6 +5,7 @@
 //!     -> Publisher (status bits, feeding rule, heartbeat) -> RegisterBank (watch: latest block)
 //!         -> Modbus TCP/RTU server tasks (PLC polls) | client task (FC16 per update) | serial line
 //!     -> Shared health <- console thread, keepalive task, live view
+//!     -> HistorySender (bounded, drop and count) -> fme-history thread -> day files (docs/history.md)
 //! ```
 //! The pipeline thread pings the systemd watchdog each loop turn (a stuck `Pipeline::process` stops
 //! the pings and systemd restarts the service); a camera outage does not (the loop keeps turning).
