@@ -28,6 +28,8 @@ enum Command {
     Run(cli::run::RunArgs),
     /// Check a configuration file or show the effective configuration.
     Config(cli::config::ConfigCmdArgs),
+    /// Summarise and plot one day of the activity history (docs/history.md).
+    Report(cli::report::ReportArgs),
 }
 
 fn main() -> ExitCode {
@@ -46,6 +48,7 @@ fn main() -> ExitCode {
         Command::Tune(a) => cli::tune::run(a),
         Command::Run(a) => cli::run::run(a),
         Command::Config(a) => cli::config::run(a),
+        Command::Report(a) => cli::report::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -3,6 +3,7 @@
 
 pub mod config;
 pub mod eval;
+pub mod report;
 pub mod run;
 pub mod synth;
 pub mod track;

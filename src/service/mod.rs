@@ -5,6 +5,7 @@
 //!     -> Publisher (status bits, feeding rule, heartbeat) -> RegisterBank (watch: latest block)
 //!         -> Modbus TCP/RTU server tasks (PLC polls) | client task (FC16 per update) | serial line
 //!     -> Shared health <- console thread, keepalive task, live view
+//!     -> HistorySender (bounded, drop and count) -> fme-history thread -> day files (docs/history.md)
 //! ```
 //! The pipeline thread pings the systemd watchdog each loop turn (a stuck `Pipeline::process` stops
 //! the pings and systemd restarts the service); a camera outage does not (the loop keeps turning).
@@ -64,6 +65,22 @@ pub fn build_pipeline(cfg: &Config) -> Result<Box<dyn Pipeline>, ServiceError> {
     }
     let p = FishPipeline::new(cfg, calibration).map_err(ServiceError::Pipeline)?;
     Ok(Box::new(p))
+}
+
+/// The activity history's directory (`docs/history.md`): `history.dir` if set, else
+/// `$STATE_DIRECTORY/history` (systemd's `StateDirectory=`); `None` (history off) when neither is
+/// set or `history.enabled` is false.
+pub fn history_dir(cfg: &Config) -> Option<std::path::PathBuf> {
+    if !cfg.history.enabled {
+        return None;
+    }
+    if !cfg.history.dir.as_os_str().is_empty() {
+        return Some(cfg.history.dir.clone());
+    }
+    let state = std::env::var_os("STATE_DIRECTORY").filter(|s| !s.is_empty())?;
+    // systemd may list several directories separated by ':'; the first is fme's.
+    let first = state.to_string_lossy().split(':').next().map(std::path::PathBuf::from)?;
+    Some(first.join("history"))
 }
 
 /// Run-time options not in the config file.
@@ -391,6 +408,15 @@ impl Daemon {
         shared.with_health(|h| h.source = source.describe());
         shared.log(Level::INFO, format!("fme {} starting on {}", env!("CARGO_PKG_VERSION"), source.describe()));
         let publisher = Arc::new(Mutex::new(Publisher::new(&cfg, bank.clone())));
+        let mut other_threads = Vec::new();
+        if let Some(dir) = history_dir(&cfg) {
+            let h = &cfg.history;
+            let (tx, thread) = crate::history::spawn(dir.clone(), h.keep_days, h.fsync_s, shared.clone())
+                .map_err(|error| ServiceError::Spawn { what: "history", error })?;
+            publisher.lock().unwrap_or_else(|p| p.into_inner()).set_history(Some(tx));
+            other_threads.push(thread);
+            shared.log(Level::INFO, format!("history: one row per update in {}", dir.display()));
+        }
         // Publish a first block at once so a PLC never reads all zeros from a running box.
         let _ = publisher.lock().unwrap_or_else(|p| p.into_inner()).publish(&shared, Instant::now(), false);
 
@@ -399,7 +425,7 @@ impl Daemon {
         let modbus_addr = roles.modbus_addr;
         let (server_stops, server_tasks, client_task) = (roles.server_stops, roles.server_tasks, roles.client_task);
         let serial_tx = roles.serial_tx;
-        let mut other_threads: Vec<_> = roles.serial_thread.into_iter().collect();
+        other_threads.extend(roles.serial_thread);
         if cfg.console.enabled {
             let (dev, baud, echo, sh, bk) =
                 (cfg.console.device.clone(), cfg.console.baud, cfg.console.echo, shared.clone(), bank.clone());
@@ -574,6 +600,8 @@ impl Daemon {
             if let Some(tx) = &self.serial_tx {
                 let _ = tx.try_send(line.to_string());
             }
+            // The "stopped" row is the history's last: the writer drains, fsyncs and ends.
+            p.set_history(None);
         }
         let _ = self.stop_tx.send(true);
         if let Some(t) = self.client_task.take() {

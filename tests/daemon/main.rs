@@ -9,6 +9,7 @@ mod bad_frames;
 mod cli;
 mod console_pty;
 mod e2e;
+mod history;
 mod modbus_client;
 mod modbus_server;
 mod support;
