@@ -19,6 +19,7 @@
 //! | [`eval`], [`mot`] | speed, depth and tracking metrics against ground truth | sec. 4.5 |
 //! | [`config`], [`status`] | the one configuration; health and fault codes shared by the edges | - |
 //! | [`capture`], [`output`], [`console`], [`service`] | the edge daemon | - |
+//! | [`history`] | a daily CSV row per output update, hourly summaries, day plots | - |
 //!
 //! Shared low-level pieces with no stage of their own: [`assign`] (the optimal assignment solver of
 //! the tracker and the MOT metrics), [`detection`] (what the detector produces and the tracker
@@ -35,6 +36,7 @@ pub mod console;
 pub mod detection;
 pub mod eval;
 pub mod geometry;
+pub mod history;
 pub mod infer;
 pub mod metric;
 pub mod mot;

@@ -30,6 +30,8 @@ enum Command {
     Config(cli::config::ConfigCmdArgs),
     /// Solve the camera calibration from measured reference objects, or check it (--check).
     Calibrate(cli::calibrate::CalibrateArgs),
+    /// Summarise and plot one day of the activity history (docs/history.md).
+    Report(cli::report::ReportArgs),
 }
 
 fn main() -> ExitCode {
@@ -49,6 +51,7 @@ fn main() -> ExitCode {
         Command::Run(a) => cli::run::run(a),
         Command::Config(a) => cli::config::run(a),
         Command::Calibrate(a) => cli::calibrate::run(a),
+        Command::Report(a) => cli::report::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

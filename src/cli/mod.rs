@@ -4,6 +4,7 @@
 pub mod calibrate;
 pub mod config;
 pub mod eval;
+pub mod report;
 pub mod run;
 pub mod synth;
 pub mod track;

@@ -39,6 +39,8 @@ pub struct Config {
     pub feeding: FeedingConfig,
     /// `[service]`: watchdog, logging, threads.
     pub service: ServiceConfig,
+    /// `[history]`: a daily CSV row per output update (`docs/history.md`).
+    pub history: HistoryConfig,
 }
 
 /// Pixel format asked of a V4L2 camera.
@@ -309,5 +311,26 @@ pub struct ServiceConfig {
 impl Default for ServiceConfig {
     fn default() -> Self {
         Self { systemd_notify: true, stall_after_s: 5.0, live_view_s: 0.0, stop_grace_ms: 500 }
+    }
+}
+
+/// `[history]`: one CSV row per output update in daily files `YYYY-MM-DD.csv` (`docs/history.md`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct HistoryConfig {
+    /// Write the history (when a directory resolves: `dir`, else the state directory's `history/`).
+    pub enabled: bool,
+    /// Days of files kept (today included); older day files are deleted.
+    pub keep_days: u32,
+    /// Directory of the day files; empty = `history/` in the state directory.
+    pub dir: PathBuf,
+    /// fsync the day file at most this often, s (0 = after every row). A killed process loses at
+    /// most the row in flight; a power cut at most this many seconds of rows.
+    pub fsync_s: f64,
+}
+
+impl Default for HistoryConfig {
+    fn default() -> Self {
+        Self { enabled: true, keep_days: 90, dir: PathBuf::new(), fsync_s: 10.0 }
     }
 }
