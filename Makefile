@@ -4,7 +4,7 @@
 CARGO ?= cargo
 BIN := target/release/fme
 
-.PHONY: all setup build test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer bench-anchors four-groups clean
+.PHONY: all setup build test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer bench-history bench-anchors four-groups clean
 
 all: build
 
@@ -35,7 +35,7 @@ demo: build
 	$(BIN) eval --sequence $(DEMO_SEQ) --boxes model --depth model
 
 # Every benchmark (speed is measured here, never in tests). mot15 parity needs ../shared beside the repo.
-bench: bench-synth bench-core bench-track bench-infer bench-daemon
+bench: bench-synth bench-core bench-track bench-infer bench-daemon bench-history
 
 bench-synth: setup
 	$(CARGO) bench --locked --bench synth
@@ -59,6 +59,9 @@ bench-track: build
 	$(CARGO) bench --locked --bench track
 	$(CARGO) bench --locked --bench track_quality
 	bash scripts/mot15_parity.sh $(BIN)
+# Activity history cost per row and disk use per day (docs/history.md).
+bench-history:
+	$(CARGO) bench --locked --bench history
 bench-infer: setup
 	$(CARGO) bench --locked --bench infer
 # Issue 5's anchor models (YOLO11n) timed beside the bundled int8 files: this machine against the

@@ -7,6 +7,7 @@
 //! | module | stage | paper |
 //! |---|---|---|
 //! | [`geometry`], [`units`] | pixel / camera / world frames, metres, seconds, m/s | sec. 3.1, Fig. 2 |
+//! | [`calib`] | camera pose (and intrinsics) from measured reference objects: `fme calibrate` | eq. 1-2 |
 //! | [`sequence`] | MOTChallenge sequences with fme's ground-truth extras | sec. 4.1 |
 //! | [`synth`] | synthetic underwater scenes with exact ground truth | sec. 4.1, 4.4 |
 //! | [`infer`] | ONNX detector and relative-depth networks, reduced-rate scheduling | sec. 4.2, 4.3 |
@@ -18,6 +19,7 @@
 //! | [`eval`], [`mot`] | speed, depth and tracking metrics against ground truth | sec. 4.5 |
 //! | [`config`], [`status`] | the one configuration; health and fault codes shared by the edges | - |
 //! | [`capture`], [`output`], [`console`], [`service`] | the edge daemon | - |
+//! | [`history`] | a daily CSV row per output update, hourly summaries, day plots | - |
 //!
 //! Shared low-level pieces with no stage of their own: [`assign`] (the optimal assignment solver of
 //! the tracker and the MOT metrics), [`detection`] (what the detector produces and the tracker
@@ -26,6 +28,7 @@
 #![warn(missing_docs)]
 
 pub mod assign;
+pub mod calib;
 pub mod capture;
 pub mod cli;
 pub mod config;
@@ -33,6 +36,7 @@ pub mod console;
 pub mod detection;
 pub mod eval;
 pub mod geometry;
+pub mod history;
 pub mod infer;
 pub mod metric;
 pub mod mot;

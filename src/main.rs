@@ -30,6 +30,10 @@ enum Command {
     Snapshot(cli::snapshot::SnapshotArgs),
     /// Check a configuration file or show the effective configuration.
     Config(cli::config::ConfigCmdArgs),
+    /// Solve the camera calibration from measured reference objects, or check it (--check).
+    Calibrate(cli::calibrate::CalibrateArgs),
+    /// Summarise and plot one day of the activity history (docs/history.md).
+    Report(cli::report::ReportArgs),
 }
 
 fn main() -> ExitCode {
@@ -49,6 +53,8 @@ fn main() -> ExitCode {
         Command::Run(a) => cli::run::run(a),
         Command::Snapshot(a) => cli::snapshot::run(a),
         Command::Config(a) => cli::config::run(a),
+        Command::Calibrate(a) => cli::calibrate::run(a),
+        Command::Report(a) => cli::report::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -11,8 +11,31 @@ fn shipped_config_equals_defaults() {
     assert_eq!(c, Config::default(), "config/fme.toml must document the built-in defaults");
 }
 
-/// Every key of the built-in defaults is written in config/fme.toml (none left to be discovered),
-/// and `fme config show` prints a config that reads back equal.
+/// config/fme.toml with the `[tracker]` section's commented-out keys (the preset's values, shown for
+/// reference) written in.
+fn shipped_with_tracker_keys() -> String {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/fme.toml");
+    let text = std::fs::read_to_string(&p).expect("read");
+    let mut in_tracker = false;
+    let mut out = String::new();
+    for l in text.lines() {
+        if l.starts_with('[') {
+            in_tracker = l.starts_with("[tracker");
+        }
+        let key_like =
+            |t: &str| t.split_once(" = ").is_some_and(|(k, _)| k.chars().all(|c| c.is_ascii_lowercase() || c == '_'));
+        match l.strip_prefix("# ") {
+            Some(t) if in_tracker && (key_like(t) || t == "[tracker.noise]") => out.push_str(t),
+            _ => out.push_str(l),
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// Every key of the built-in defaults is written in config/fme.toml (the tracker's as commented-out
+/// preset values), none left to be discovered; those commented values are the defaults; and
+/// `fme config show` prints a config that reads back equal.
 #[test]
 fn shipped_config_spells_out_every_key() {
     fn keys(t: &toml::Table, prefix: &str, out: &mut Vec<String>) {
@@ -25,15 +48,25 @@ fn shipped_config_spells_out_every_key() {
     }
     let shown = Config::default().to_toml();
     let defaults: toml::Table = toml::from_str(&shown).expect("config show is TOML");
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/fme.toml");
-    let file: toml::Table = toml::from_str(&std::fs::read_to_string(&p).expect("read")).expect("TOML");
+    let spelled = shipped_with_tracker_keys();
+    let file: toml::Table = toml::from_str(&spelled).expect("TOML");
     let (mut want, mut have) = (Vec::new(), Vec::new());
     keys(&defaults, "", &mut want);
     keys(&file, "", &mut have);
     let missing: Vec<&String> = want.iter().filter(|k| !have.contains(k)).collect();
     assert!(missing.is_empty(), "config/fme.toml lacks {missing:?}");
     assert!(want.len() > 100, "{} keys", want.len());
+    assert_eq!(Config::parse(&spelled, Path::new("spelled.toml")).expect("loads"), Config::default());
     assert_eq!(Config::parse(&shown, Path::new("shown.toml")).expect("reads back"), Config::default());
+}
+
+/// A copy of config/fme.toml with only the preset changed gets that preset's settings.
+#[test]
+fn changing_the_preset_in_the_shipped_file_takes_effect() {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/fme.toml");
+    let text = std::fs::read_to_string(&p).expect("read").replace("preset = \"default\"", "preset = \"sort\"");
+    let c = Config::parse(&text, Path::new("copy.toml")).expect("loads");
+    assert_eq!(c.tracker, fme::track::TrackerConfig::sort());
 }
 
 #[test]
@@ -41,15 +74,16 @@ fn every_key_in_shipped_config_is_commented() {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/fme.toml");
     let text = std::fs::read_to_string(&p).expect("read");
     let lines: Vec<&str> = text.lines().collect();
+    let is_key = |t: &str| !t.is_empty() && !t.starts_with('#') && !t.starts_with('[');
     for (i, l) in lines.iter().enumerate() {
         let t = l.trim();
-        if t.is_empty() || t.starts_with('#') || t.starts_with('[') {
+        if !is_key(t) {
             continue;
         }
-        // Walk back over the keys of the same group to the comment that documents them.
-        let documented =
-            lines[..i].iter().rev().take_while(|p| !p.trim().is_empty()).any(|p| p.trim().starts_with('#'));
-        assert!(documented, "config/fme.toml line {}: `{t}` has no comment", i + 1);
+        // Walk back over the keys of the same group: the first line above them that is not a key
+        // must be the comment that documents them.
+        let above = lines[..i].iter().rev().map(|p| p.trim()).find(|p| !is_key(p));
+        assert!(above.is_some_and(|p| p.starts_with('#')), "config/fme.toml line {}: `{t}` has no comment", i + 1);
     }
 }
 

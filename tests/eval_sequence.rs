@@ -342,7 +342,7 @@ fn cli_json_series_and_plot() {
         "depth_delta_1_25",
         "depth_delta_1_25_2",
     ] {
-        assert!(j.get(k).is_some(), "missing {k} in {j}");
+        assert!(j.get(k).is_some_and(|v| v.is_number() || v.is_array()), "missing {k} in {j}");
     }
     let csv = std::fs::read_to_string(&series).unwrap();
     assert!(csv.starts_with(
@@ -451,7 +451,7 @@ fn a_reader_that_closes_the_pipe_early_is_not_an_error() {
 fn fails_with(args: &[&str], dir: &Path, needles: &[&str]) {
     let out = fme().args(["eval", "--sequence"]).arg(dir).args(args).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "expected failure for {args:?}");
+    assert_eq!(out.status.code(), Some(2), "expected a usage error (2) for {args:?}: {err}");
     for n in needles {
         assert!(err.contains(n), "stderr lacks {n:?}: {err}");
     }
@@ -499,6 +499,10 @@ fn bad_input_names_file_and_line_and_exits_non_zero() {
     fails_with(&[], &dir, &["meta.json"]);
     fails_with(&[], &tmp.path().join("nowhere"), &["nowhere"]);
     // Bad option values are usage errors (exit code 2).
-    let out = fme().args(["eval", "--sequence"]).arg(&dir).args(["--speed-span", "-1"]).output().unwrap();
+    // Bad option values are usage errors (exit code 2) that name the key, on a valid sequence.
+    let good = tmp.path().join("good");
+    write_sequence(&good);
+    let out = fme().args(["eval", "--sequence"]).arg(&good).arg("--speed-span=-1").output().unwrap();
     assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("motion.speed_span_s"));
 }

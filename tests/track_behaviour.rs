@@ -72,6 +72,8 @@ fn detection_every_third_frame_keeps_identities_of_fast_crossing_fish() {
             }
         }
         assert_eq!(seen.len(), 2, "every {k_det}: two identities, each on its own fish: {seen:?}");
+        let ids: std::collections::HashSet<u32> = seen.iter().map(|&(id, _)| id).collect();
+        assert_eq!(ids.len(), 2, "every {k_det}: one id per fish, not one id on both: {seen:?}");
     }
 }
 
@@ -81,7 +83,7 @@ fn low_score_detections_extend_tracks_but_do_not_start_them() {
     let mut reported = 0;
     for k in 0..30 {
         let t = k as f64 / 30.0;
-        // Occluded from frame 10 on: score drops to 0.3 (below track_thresh 0.5).
+        // Occluded from frame 10 on: score drops to 0.3 (below track_threshold 0.5).
         let s = if k < 10 { 0.9 } else { 0.3 };
         let clutter = Detection::new(PixelBox::new(500.0, 500.0, 40.0, 40.0), 0.3);
         let out = tr.update(Seconds(t), &[moving(t, 0.0, 60.0, s), clutter]).expect("ok");

@@ -15,8 +15,8 @@ fn detection_overflow_keeps_highest_scores() {
     const { assert!(MAX_DETS >= 256 && MAX_TRACKS >= 128) };
     let mut cfg = TrackerConfig::default_preset();
     cfg.min_hits = 1;
-    cfg.new_track_thresh = 0.0;
-    cfg.track_thresh = 0.0;
+    cfg.new_track_threshold = 0.0;
+    cfg.track_threshold = 0.0;
     let mut t = Tracker::new(cfg);
     // 300 detections; scores rise with the index, so the best are the last ones.
     let dets = grid(300, |i| 0.1 + i as f64 / 1000.0);
@@ -51,7 +51,7 @@ fn configured_max_tracks_caps_below_capacity() {
     let mut cfg = TrackerConfig::default_preset();
     cfg.max_tracks = 10;
     cfg.min_hits = 1;
-    cfg.new_track_thresh = 0.0;
+    cfg.new_track_threshold = 0.0;
     let mut t = Tracker::new(cfg);
     let dets = grid(30, |i| 0.9 - i as f64 / 100.0);
     let out = t.update(Seconds(0.0), &dets).expect("ok").to_vec();

@@ -1,7 +1,9 @@
 //! `fme eval`: run the daemon's pipeline on a recorded sequence and score it against ground truth.
 
-use super::{ConfigArgs, set_text, set_value};
-use crate::eval::{BoxesChoice, DepthChoice, EvalOptions, EvalReport, evaluate, plot, write_series, write_tracks};
+use super::{ConfigArgs, UsageError, set_text, set_value};
+use crate::eval::{
+    BoxesChoice, DepthChoice, EvalError, EvalOptions, EvalReport, evaluate, plot, write_series, write_tracks,
+};
 use crate::metric::{DepthSample, FitMethod};
 use crate::motion::{AlongRay, SpeedMethod};
 use crate::sequence::Sequence;
@@ -70,9 +72,9 @@ pub struct EvalArgs {
     /// ONNX Runtime threads of both networks (`--set detector.threads=N --set depth.threads=N`).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Tracker preset (`--set tracker.preset=...`).
+    /// Tracker preset (`--set tracker.preset=...`), as `fme track --preset`.
     #[arg(long, value_enum)]
-    pub tracker: Option<crate::track::Preset>,
+    pub preset: Option<crate::track::TrackerPreset>,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -147,7 +149,7 @@ impl EvalArgs {
             s.push(set_value("detector.threads", n));
             s.push(set_value("depth.threads", n));
         }
-        if let Some(v) = &self.tracker {
+        if let Some(v) = &self.preset {
             s.push(set_text("tracker.preset", &name(v)));
         }
         s
@@ -235,11 +237,11 @@ fn rate(hz: f64) -> String {
 /// Runs `fme eval`.
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if !(args.rel_noise.is_finite() && args.rel_noise >= 0.0 && args.rel_distortion.is_finite()) {
-        return Err(super::UsageError("--rel-noise must be >= 0 and --rel-distortion finite".into()).into());
+        return Err(UsageError("--rel-noise must be >= 0 and --rel-distortion finite".into()).into());
     }
     let (cfg, _) = args.config.load(&args.sugar())?;
-    let seq =
-        Sequence::open(&args.sequence).with_context(|| format!("opening sequence {}", args.sequence.display()))?;
+    let seq = Sequence::open(&args.sequence)
+        .map_err(|e| UsageError(format!("opening sequence {}: {e}", args.sequence.display())))?;
     let mut opts = EvalOptions {
         boxes: args.boxes.clone(),
         depth: args.depth,
@@ -252,7 +254,11 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     opts.relative.seed = seq.meta.seed ^ 0x5eed;
     let outputs: Vec<&PathBuf> = [&args.tracks, &args.series, &args.plot].into_iter().flatten().collect();
     let created = open_outputs(&outputs)?;
-    let report = evaluate(&seq, &cfg, &opts).inspect_err(|_| remove_all(&created))?;
+    // Bad inputs (sequence, box file, model, calibration) are usage problems: exit 2.
+    let report = evaluate(&seq, &cfg, &opts).inspect_err(|_| remove_all(&created)).map_err(|e| match e {
+        EvalError::Output { .. } => anyhow::Error::new(e),
+        other => anyhow::Error::new(UsageError(other.to_string())),
+    })?;
     if let Some(p) = &args.tracks {
         write_tracks(p, &report.tracks)?;
     }

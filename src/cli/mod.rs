@@ -1,8 +1,10 @@
 //! Command-line front ends of the `fme` subcommands. Each file holds one subcommand's arguments and
 //! its `run` function; `src/main.rs` only parses and dispatches.
 
+pub mod calibrate;
 pub mod config;
 pub mod eval;
+pub mod report;
 pub mod run;
 pub mod snapshot;
 pub mod synth;

@@ -3,7 +3,7 @@
 use crate::cli::{ConfigArgs, UsageError, set_text};
 use crate::mot::io::{self, MotRow, ReadOptions};
 use crate::mot::{MotAccumulator, MotMetrics};
-use crate::track::{Detection, Preset, Tracker, TrackerConfig};
+use crate::track::{Detection, Tracker, TrackerConfig, TrackerPreset};
 use crate::units::Seconds;
 use anyhow::Context;
 use std::io::Write;
@@ -24,7 +24,7 @@ pub struct TrackArgs {
     pub config: ConfigArgs,
     /// Tracker preset (`--set tracker.preset=...`): `sort` (exact SORT) or `default`.
     #[arg(long, value_enum)]
-    pub preset: Option<Preset>,
+    pub preset: Option<TrackerPreset>,
     /// Frame rate of the detections, frames per second (frame times are `(frame - 1) / fps`).
     #[arg(long, default_value_t = 30.0)]
     pub fps: f64,
@@ -40,10 +40,10 @@ pub struct TrackArgs {
 }
 
 /// The tracker settings of the one config, with `--preset` as a `--set`.
-pub fn tracker_config(config: &ConfigArgs, preset: Option<Preset>) -> anyhow::Result<TrackerConfig> {
+pub fn tracker_config(config: &ConfigArgs, preset: Option<TrackerPreset>) -> anyhow::Result<TrackerConfig> {
     let sugar: Vec<String> = preset
         .iter()
-        .map(|p| set_text("tracker.preset", if *p == Preset::Sort { "sort" } else { "default" }))
+        .map(|p| set_text("tracker.preset", if *p == TrackerPreset::Sort { "sort" } else { "default" }))
         .collect();
     Ok(config.load(&sugar)?.0.tracker)
 }
@@ -117,18 +117,23 @@ pub fn metrics_line(m: &MotMetrics) -> String {
     )
 }
 
+/// A bad input file is a usage problem (exit 2); the message names the file and line.
+fn input(e: impl std::fmt::Display) -> UsageError {
+    UsageError(e.to_string())
+}
+
 /// Runs `fme track`.
 pub fn run(args: TrackArgs) -> anyhow::Result<()> {
     if !(args.fps > 0.0 && args.fps.is_finite()) {
         return Err(UsageError(format!("--fps {} must be a positive number", args.fps)).into());
     }
     let result = if let Some(hyp) = &args.hyp {
-        io::read_file(hyp, ReadOptions::default())?
+        io::read_file(hyp, ReadOptions::default()).map_err(input)?
     } else {
         let det = args.det.as_deref().ok_or_else(|| UsageError("--det is required".into()))?;
         let cfg = tracker_config(&args.config, args.preset)?;
-        let mut dets = io::read_file(det, ReadOptions { require_sorted: true })?;
-        let rows = track_rows(cfg, &mut dets, args.fps)?;
+        let mut dets = io::read_file(det, ReadOptions { require_sorted: true }).map_err(input)?;
+        let rows = track_rows(cfg, &mut dets, args.fps).map_err(|e| UsageError(format!("{}: {e:#}", det.display())))?;
         if let Some(out) = &args.out {
             let f = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
             let mut w = std::io::BufWriter::new(f);
@@ -148,7 +153,7 @@ pub fn run(args: TrackArgs) -> anyhow::Result<()> {
         rows
     };
     if let Some(gt) = &args.gt {
-        let gt = io::read_file(gt, ReadOptions::default())?;
+        let gt = io::read_file(gt, ReadOptions::default()).map_err(input)?;
         let m = score(&gt, &result);
         let text = if args.json {
             format!("{}\n", serde_json::to_string(&m)?)

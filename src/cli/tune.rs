@@ -41,7 +41,7 @@ pub struct TuneArgs {
     pub config: ConfigArgs,
     /// Tracker preset the grid varies (`--set tracker.preset=...`).
     #[arg(long, value_enum)]
-    pub preset: Option<crate::track::Preset>,
+    pub preset: Option<crate::track::TrackerPreset>,
     /// Seed of the synthetic detector noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -215,13 +215,13 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
         let s: Vec<String> = set.iter().map(|(k, v)| format!("{k}={v}")).collect();
         let mut cfg = base;
         for (k, v) in set {
-            let _ = crate::track::tune::set_key(&mut cfg, k, *v);
+            crate::track::tune::set_key(&mut cfg, k, *v).map_err(UsageError)?;
         }
         writeln!(rep, "{:<8} {}  {}", r + 1, metrics_line(&score(cfg)), s.join(" "))?;
     }
     writeln!(rep, "{:<8} {}  (preset sort)", "sort", metrics_line(&score(TrackerConfig::sort())))?;
     writeln!(rep, "{:<8} {}  (preset default)", "default", metrics_line(&score(TrackerConfig::default_preset())))?;
-    let preset = if base.preset == crate::track::Preset::Sort { "sort" } else { "default" };
+    let preset = if base.preset == crate::track::TrackerPreset::Sort { "sort" } else { "default" };
     writeln!(rep, "# best settings, for the config file:\n[tracker]\npreset = \"{preset}\"")?;
     for (k, v) in &results[0].0 {
         writeln!(rep, "{k} = {v}")?;

@@ -223,10 +223,10 @@ impl Config {
         if let Err(e) = allow::AllowList::parse(&m.allow) {
             return err("output.modbus.allow", e);
         }
-        if self.output.serial.enabled && self.output.serial.baud == 0 {
+        if self.output.serial.baud == 0 {
             return err("output.serial.baud", "must be > 0");
         }
-        if self.console.enabled && self.console.baud == 0 {
+        if self.console.baud == 0 {
             return err("console.baud", "must be > 0");
         }
         if self.console.log_lines == 0 || self.console.log_lines > 10_000 {
@@ -270,6 +270,13 @@ impl Config {
         }
         if r.queue_frames == 0 || r.queue_frames > 1024 {
             return err("record.queue_frames", format!("must be 1..=1024, got {}", r.queue_frames));
+        }
+        let h = &self.history;
+        if h.keep_days == 0 || h.keep_days > 36_500 {
+            return err("history.keep_days", format!("must be 1..=36500 days, got {}", h.keep_days));
+        }
+        if !(h.fsync_s.is_finite() && (0.0..=3600.0).contains(&h.fsync_s)) {
+            return err("history.fsync_s", format!("must be 0..=3600 s, got {}", h.fsync_s));
         }
         Ok(())
     }

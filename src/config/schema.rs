@@ -41,6 +41,8 @@ pub struct Config {
     pub service: ServiceConfig,
     /// `[record]`: black box (rolling ring of frames), frozen recordings and snapshots.
     pub record: RecordConfig,
+    /// `[history]`: a daily CSV row per output update (`docs/history.md`).
+    pub history: HistoryConfig,
 }
 
 /// Pixel format asked of a V4L2 camera.
@@ -369,5 +371,26 @@ impl Default for RecordConfig {
             freeze_min_gap_s: 600.0,
             queue_frames: 32,
         }
+    }
+}
+
+/// `[history]`: one CSV row per output update in daily files `YYYY-MM-DD.csv` (`docs/history.md`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct HistoryConfig {
+    /// Write the history (when a directory resolves: `dir`, else the state directory's `history/`).
+    pub enabled: bool,
+    /// Days of files kept (today included); older day files are deleted.
+    pub keep_days: u32,
+    /// Directory of the day files; empty = `history/` in the state directory.
+    pub dir: PathBuf,
+    /// fsync the day file at most this often, s (0 = after every row). A killed process loses at
+    /// most the row in flight; a power cut at most this many seconds of rows.
+    pub fsync_s: f64,
+}
+
+impl Default for HistoryConfig {
+    fn default() -> Self {
+        Self { enabled: true, keep_days: 90, dir: PathBuf::new(), fsync_s: 10.0 }
     }
 }

@@ -5,8 +5,8 @@
 //! scripts can parse it. Garbage, over-long lines and binary noise get an `ERR` line and never stop
 //! the daemon. Output never blocks the console ([`writer`]): a terminal that stops reading loses
 //! output (counted: `console-output-dropped`), never its input. Commands: `help`, `status`, `version`, `activity`, `tracks`, `calib`, `regs`,
-//! `counters`, `log [n]`, `stream on|off`, `config`, `snap`, `record`, `record save [label]`
-//! (docs/recording.md).
+//! `counters`, `log [n]`, `history [hours]`, `stream on|off`, `config`, `snap`, `record`,
+//! `record save [label]` (docs/recording.md).
 
 pub mod writer;
 
@@ -151,6 +151,7 @@ const HELP: &str = "commands (case-insensitive; only snap and record save write,
   regs            input registers 0-23 (holding registers mirror them)
   counters        frames, drops, errors, reconnects, modbus, latency
   log [n]         last n log lines (default 10)
+  history [hours] hourly activity summary of the last hours (default 24, max 168)
   stream on|off   print one activity line per update
   config          the configuration file in use
   snap            snapshot of the next frame (overlays + depth map) into snapshots/
@@ -259,7 +260,7 @@ last {}",
                 let h = shared.health();
                 let _ = write!(
                     body,
-                    "state {}\nstatus 0x{:04x} {}\nfault {} ({})\nsource {}\nuptime {} s\nfeeding-recommended {}",
+                    "state {}\nstatus 0x{:04x} {}\nfault {} ({})\nsource {}\nuptime {} s\nfeeding-recommended {}\nhistory {}",
                     if shared.stopping() { "stopping" } else { "running" },
                     r[10],
                     status_words(r[10]),
@@ -267,7 +268,8 @@ last {}",
                     fault_name(r[11]),
                     h.source,
                     h.started.elapsed().as_secs(),
-                    r[17]
+                    r[17],
+                    shared.history.describe()
                 );
                 Ok(())
             }
@@ -318,7 +320,7 @@ last {}",
                 let q = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.0} ms"));
                 let _ = write!(
                     body,
-                    "frames-captured {}\nframes-processed {}\nframes-dropped {}\ncamera-fps {:.1}\ncapture-errors {}\nreconnects {}\npipeline-errors {}\nupdates {}\nmodbus-requests {}\nmodbus-exceptions {}\nmodbus-tcp-open {}\nmodbus-tcp-idle-closed {}\nmodbus-tcp-evicted {}\nmodbus-tcp-accept-errors {}\nmodbus-tcp-refused {}\nmodbus-tcp-bad-frames {}\nmodbus-task-panics {}\nplc-writes {}\nplc-failures {}\nconsole-output-dropped {}\nrecord-written {}\nrecord-dropped {}\nrecord-write-errors {}\nlatency-p50 {}\nlatency-p99 {}",
+                    "frames-captured {}\nframes-processed {}\nframes-dropped {}\ncamera-fps {:.1}\ncapture-errors {}\nreconnects {}\npipeline-errors {}\nupdates {}\nmodbus-requests {}\nmodbus-exceptions {}\nmodbus-tcp-open {}\nmodbus-tcp-idle-closed {}\nmodbus-tcp-evicted {}\nmodbus-tcp-accept-errors {}\nmodbus-tcp-refused {}\nmodbus-tcp-bad-frames {}\nmodbus-task-panics {}\nplc-writes {}\nplc-failures {}\nconsole-output-dropped {}\nhistory-rows {}\nhistory-dropped {}\nhistory-failed {}\nrecord-written {}\nrecord-dropped {}\nrecord-write-errors {}\nlatency-p50 {}\nlatency-p99 {}",
                     h.frames_captured,
                     h.frames_processed,
                     h.frames_dropped,
@@ -339,6 +341,9 @@ last {}",
                     m.client_writes,
                     m.client_failures,
                     writer::output_dropped(),
+                    shared.history.written.load(std::sync::atomic::Ordering::Relaxed),
+                    shared.history.dropped.load(std::sync::atomic::Ordering::Relaxed),
+                    shared.history.failed.load(std::sync::atomic::Ordering::Relaxed),
                     h.record.frames_written,
                     h.record.frames_dropped,
                     h.record.write_errors,
@@ -357,6 +362,17 @@ last {}",
                     Ok(())
                 }
                 Some(_) => Err("usage: log [n] with n from 1 to 10000".into()),
+            },
+            ("history", n, _) => match (n.map_or(Ok(24), str::parse::<usize>), shared.history.dir()) {
+                (Ok(h), Some(dir)) if (1..=168).contains(&h) => {
+                    crate::history::hourly_report(dir, crate::history::now_unix_ms(), h)
+                        .map(|t| body.push_str(&t))
+                        .map_err(|e| e.to_string())
+                }
+                (Ok(h), None) if (1..=168).contains(&h) => {
+                    Err("history is off (set history.dir or run under systemd with StateDirectory=)".into())
+                }
+                _ => Err("usage: history [hours] with hours from 1 to 168".into()),
             },
             ("stream", Some("on"), _) => {
                 self.stream = true;
@@ -607,6 +623,50 @@ record
         let mut out = String::new();
         quiet.feed(&[b'a'; 100], &s.0, &s.1, &mut out);
         assert!(out.starts_with("ERR line too long"), "no echo, no extra line: {out:?}");
+    }
+
+    #[test]
+    fn history_hourly_summary_from_the_files() {
+        let s = shared();
+        assert!(run(b"history\n").starts_with("ERR history is off"), "no directory: off");
+        let dir = tempfile::tempdir().expect("tempdir");
+        let now = crate::history::now_unix_ms();
+        let mut w = crate::history::DayWriter::new(dir.path(), 30, 0.0);
+        // One row a second for the last 10 minutes: 0.1 m/s, feeding for all of them.
+        for i in 0..600 {
+            let r = crate::history::Row {
+                unix_ms: now - (600 - i) * 1000,
+                activity_mps: 0.1,
+                smoothed_mps: 0.1,
+                ci95_mps: 0.01,
+                n_fish: 5,
+                bls: 0.3,
+                status: 1,
+                fault: 0,
+                feeding: true,
+            };
+            w.write(&r).expect("write");
+        }
+        s.0.history.set_dir(dir.path());
+        let mut sess = Session::default();
+        let mut out = String::new();
+        sess.command("history 2", &s.0, &s.1, &mut out);
+        let lines: Vec<&str> = out.split("\r\n").filter(|l| !l.is_empty()).collect();
+        assert_eq!(lines.len(), 4, "header, two hours, OK: {out}");
+        assert!(lines[0].starts_with("hour (UTC)"), "{out}");
+        assert_eq!(lines[3], "OK");
+        let rows: u32 = lines[1..3]
+            .iter()
+            .map(|l| l.split_whitespace().nth(2).and_then(|n| n.parse::<u32>().ok()).unwrap_or(0))
+            .sum();
+        assert_eq!(rows, 600, "{out}");
+        assert!(lines[2].contains(" 0.100 "), "{out}");
+        let mut out = String::new();
+        sess.command("history 0", &s.0, &s.1, &mut out);
+        assert!(out.starts_with("ERR usage: history"), "{out}");
+        let mut out = String::new();
+        sess.command("status", &s.0, &s.1, &mut out);
+        assert!(out.contains(&format!("history on {}", dir.path().display())), "{out}");
     }
 
     #[test]

@@ -9,12 +9,18 @@ use std::sync::Once;
 static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSansMono.ttf");
 static REGISTER: Once = Once::new();
 
-/// Draws the report's series (true, estimated, and estimated without post-processing) to `path`.
-pub fn plot_series(path: &Path, report: &EvalReport) -> Result<(), EvalError> {
+/// Registers the bundled font as plotters' `sans-serif` (once per process; every PNG fme draws
+/// uses it).
+pub fn register_font() {
     REGISTER.call_once(|| {
         // A bundled valid TTF; if it were rejected, text would be missing but the plot still drawn.
         let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
     });
+}
+
+/// Draws the report's series (true, estimated, and estimated without post-processing) to `path`.
+pub fn plot_series(path: &Path, report: &EvalReport) -> Result<(), EvalError> {
+    register_font();
     let err = |e: String| EvalError::Output { path: path.to_path_buf(), msg: e };
     let s = &report.series;
     let t_max = s.iter().map(super::ScoredRow::t).fold(0.0, f64::max).max(1e-3);

@@ -33,12 +33,11 @@ impl Default for RelativeGtParams {
     }
 }
 
+/// One SplitMix64 step as a hash of `z` (the crate's one generator, [`crate::rng`], counter-based
+/// here so every pixel's noise is reproducible on its own).
 #[inline]
-fn splitmix(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
+fn splitmix(z: u64) -> u64 {
+    crate::rng::mix(z.wrapping_add(0x9e37_79b9_7f4a_7c15))
 }
 
 /// Standard normal from a hash (Box-Muller on two uniforms).

@@ -56,12 +56,6 @@ impl Pose {
         WorldPoint(self.rotation.transpose() * (p.0 - self.translation))
     }
 
-    /// A world-frame direction (velocity, offset) expressed in the camera frame.
-    #[inline]
-    pub fn direction_to_camera(&self, d: &Vector3<f64>) -> Vector3<f64> {
-        self.rotation * d
-    }
-
     /// The camera's optical centre in world coordinates.
     #[inline]
     pub fn camera_center(&self) -> WorldPoint {

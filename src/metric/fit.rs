@@ -214,10 +214,9 @@ pub fn fit_robust(
             }
         }
     }
-    let Some((mut mask, count, _)) = best.filter(|b| b.1 >= 2) else {
+    let Some((mut mask, _, _)) = best.filter(|b| b.1 >= 2) else {
         return fit(model, refs);
     };
-    let _ = count;
     let mut f = least_squares(model, refs, mask)?;
     let (mask2, count2, _) = inliers_of(&f);
     if count2 >= 2

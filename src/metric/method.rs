@@ -13,7 +13,7 @@ pub enum FitMethod {
     Linear,
     /// `1/D = s*R + t`.
     Inverse,
-    /// The inverse model by [`fit_robust`] (survives one or two fouled or hidden references).
+    /// The inverse model by `fit_robust` (survives one or two fouled or hidden references).
     Robust,
     /// 2nd-order polynomial in `R` (paper Table 4).
     Poly2,

@@ -8,16 +8,16 @@ use crate::geometry::{Pixel, PixelBox};
 pub enum DepthSample {
     /// A small median window at the (corrected) box centre: the paper's "depth at the centre point".
     Centre,
-    /// A quantile over the central half of the box taking its nearest quarter ([`sample_box_quantile`]):
+    /// A quantile over the central half of the box taking its nearest quarter (`sample_box_quantile`):
     /// the fish, not the water or wall behind a thin or bent fish.
     Box,
-    /// As `Box`, but only where no other fish's box covers the core ([`sample_box_quantile_visible`]):
+    /// As `Box`, but only where no other fish's box covers the core (`sample_box_quantile_visible`):
     /// a fish partly hidden behind another is read where it is seen, not on the fish in front. A fish
-    /// that another box covers gets no depth in that frame when fewer than [`MIN_VISIBLE_POINTS`] of
+    /// that another box covers gets no depth in that frame when fewer than `MIN_VISIBLE_POINTS` of
     /// its 81 grid points are left uncovered (and inside the image), or fewer than
-    /// [`MIN_VISIBLE_POINTS_BEHIND`] while the map shows one of the fish covering it nearer than it
-    /// ([`behind_a_nearer_fish`]): the estimator skips it, and its speed resumes from its last
-    /// position when it is seen again. At most [`MAX_OVERLAPS`] other boxes are considered per fish.
+    /// `MIN_VISIBLE_POINTS_BEHIND` while the map shows one of the fish covering it nearer than it
+    /// (`behind_a_nearer_fish`): the estimator skips it, and its speed resumes from its last
+    /// position when it is seen again. At most `MAX_OVERLAPS` other boxes are considered per fish.
     Visible,
 }
 

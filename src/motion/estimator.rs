@@ -239,7 +239,7 @@ pub struct TrackView {
 }
 
 #[derive(Debug, Clone)]
-struct FishState {
+struct FishMotion {
     id: u32,
     /// Time of its first observation.
     first_seen: f64,
@@ -253,7 +253,7 @@ struct FishState {
     lengths: LengthHistogram,
 }
 
-impl FishState {
+impl FishMotion {
     fn new(id: u32, first_seen: f64) -> Self {
         Self {
             id,
@@ -277,7 +277,7 @@ pub struct ActivityEstimator {
     camera: Camera,
     motion: MotionConfig,
     post: PostprocessConfig,
-    tracks: Vec<FishState>,
+    tracks: Vec<FishMotion>,
     smoothed: Option<(f64, f64)>,
     /// Apparent lengths of all fish, decaying with [`SWARM_LENGTH_MEMORY_S`], and when last decayed.
     swarm_lengths: LengthHistogram,
@@ -336,7 +336,7 @@ impl ActivityEstimator {
         })
     }
 
-    fn length_of(&self, s: &FishState) -> Option<Metres> {
+    fn length_of(&self, s: &FishMotion) -> Option<Metres> {
         self.motion.body_length().or_else(|| fish_length(&s.lengths, self.swarm_floor))
     }
 
@@ -380,7 +380,7 @@ impl ActivityEstimator {
             let idx = match self.tracks.iter().position(|s| s.id == obs.id) {
                 Some(i) => i,
                 None if self.tracks.len() < self.capacity => {
-                    self.tracks.push(FishState::new(obs.id, t.0));
+                    self.tracks.push(FishMotion::new(obs.id, t.0));
                     self.tracks.len() - 1
                 }
                 None => {

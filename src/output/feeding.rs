@@ -24,11 +24,6 @@ impl FeedingRule {
         Self { cfg, on: false, since_s: None }
     }
 
-    /// Current recommendation.
-    pub fn is_on(&self) -> bool {
-        self.on
-    }
-
     /// Feeds one update at time `now_s` (any monotonic clock, s) with the smoothed activity (m/s), or
     /// `None` when there is no usable value. Returns the recommendation.
     pub fn update(&mut self, now_s: f64, smoothed_mps: Option<f64>) -> bool {

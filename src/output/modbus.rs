@@ -22,7 +22,7 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 use tokio_modbus::prelude::*;
-use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
+use tokio_modbus::{ExceptionCode, Request, Response};
 
 /// A Modbus role failed to start (bind, open serial). Runtime failures are retried, not returned.
 #[derive(Debug, thiserror::Error)]
@@ -49,18 +49,17 @@ pub enum ModbusError {
 ///
 /// FC03/FC04 read the block (holding registers also expose HR 100..103); FC06/FC16 may write only
 /// HR 100..103 (anything else: IllegalDataAddress); FC01/FC02 read coil/discrete input 0 = feeding
-/// recommended; any other function: IllegalFunction. With `unit_id = Some(id)` (RTU) requests for
-/// other units are ignored (no reply), as on a shared RS-485 bus.
+/// recommended; any other function: IllegalFunction. Which unit ids are answered is the framing's
+/// business (the RTU server ignores other units, as on a shared RS-485 bus; TCP answers any).
 #[derive(Debug, Clone)]
 pub struct RegisterService {
     bank: Arc<RegisterBank>,
-    unit_id: Option<u8>,
 }
 
 impl RegisterService {
-    /// A handler; `unit_id` filters requests (RTU), `None` answers every unit id (TCP).
-    pub fn new(bank: Arc<RegisterBank>, unit_id: Option<u8>) -> Self {
-        Self { bank, unit_id }
+    /// A handler over `bank`.
+    pub fn new(bank: Arc<RegisterBank>) -> Self {
+        Self { bank }
     }
 
     fn read(&self, addr: u16, cnt: u16, holding: bool) -> Result<Vec<u16>, ExceptionCode> {
@@ -114,25 +113,6 @@ impl RegisterService {
             Request::WriteSingleCoil(..) | Request::WriteMultipleCoils(..) => Err(ExceptionCode::IllegalDataAddress),
             _ => Err(ExceptionCode::IllegalFunction),
         }
-    }
-}
-
-impl tokio_modbus::server::Service for RegisterService {
-    type Request = SlaveRequest<'static>;
-    type Response = Option<Response>;
-    type Exception = ExceptionCode;
-    type Future = std::future::Ready<Result<Option<Response>, ExceptionCode>>;
-
-    fn call(&self, req: Self::Request) -> Self::Future {
-        if let Some(id) = self.unit_id
-            && req.slave != id
-            && req.slave != 0
-        {
-            return std::future::ready(Ok(None));
-        }
-        let res = self.handle(req.request);
-        self.bank.note_request(res.is_err());
-        std::future::ready(res.map(Some))
     }
 }
 
@@ -230,7 +210,7 @@ fn note_panic(bank: &RegisterBank, log: &mut LogThrottle, what: &str, p: Box<dyn
 /// timeout, eviction, or a frame that cannot be framed.
 async fn serve_connection(mut stream: GuardedStream, bank: Arc<RegisterBank>) {
     use tokio::io::AsyncWriteExt as _;
-    let service = RegisterService::new(bank.clone(), None);
+    let service = RegisterService::new(bank.clone());
     let mut buf = Vec::with_capacity(MAX_PDU);
     let mut out = Vec::with_capacity(MAX_PDU + 7);
     loop {
@@ -318,7 +298,7 @@ async fn rtu_loop<S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin>(
     mut shutdown: std::pin::Pin<&mut impl Future<Output = ()>>,
 ) -> std::io::Result<bool> {
     use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
-    let service = RegisterService::new(bank.clone(), Some(unit_id));
+    let service = RegisterService::new(bank.clone());
     let mut buf: Vec<u8> = Vec::with_capacity(512);
     let mut chunk = [0u8; 256];
     let mut pdu = Vec::with_capacity(MAX_PDU);

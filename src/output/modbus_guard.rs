@@ -27,9 +27,9 @@ use tokio_modbus::{ExceptionCode, Request, Response};
 /// Largest PDU (function code + data), bytes.
 pub const MAX_PDU: usize = 253;
 
-/// A framed request: MBAP transaction id and unit id, and the PDU.
+/// A framed TCP request (application data unit): MBAP transaction id and unit id, and the PDU.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Frame {
+pub struct Adu {
     /// Transaction id (echoed).
     pub transaction: u16,
     /// Unit id (echoed).
@@ -55,7 +55,7 @@ pub enum FrameError {
 }
 
 /// Reads one MBAP-framed request from `r`. `pdu` is reused as the frame's buffer.
-pub async fn read_frame<R: AsyncRead + Unpin>(r: &mut R, mut pdu: Vec<u8>) -> Result<Frame, FrameError> {
+pub async fn read_frame<R: AsyncRead + Unpin>(r: &mut R, mut pdu: Vec<u8>) -> Result<Adu, FrameError> {
     let mut h = [0u8; 7];
     r.read_exact(&mut h).await?;
     let transaction = u16::from_be_bytes([h[0], h[1]]);
@@ -67,7 +67,7 @@ pub async fn read_frame<R: AsyncRead + Unpin>(r: &mut R, mut pdu: Vec<u8>) -> Re
     pdu.clear();
     pdu.resize(usize::from(length) - 1, 0);
     r.read_exact(&mut pdu).await?;
-    Ok(Frame { transaction, unit: h[6], pdu })
+    Ok(Adu { transaction, unit: h[6], pdu })
 }
 
 fn word(b: &[u8], i: usize) -> u16 {
@@ -206,7 +206,7 @@ pub fn answer_pdu(
 
 /// The complete answer ADU (MBAP header + PDU) to a TCP `frame`, see [`answer_pdu`].
 pub fn answer(
-    frame: &Frame,
+    frame: &Adu,
     handle: impl FnOnce(Request<'static>) -> Result<Response, ExceptionCode>,
     out: &mut Vec<u8>,
 ) -> bool {

@@ -5,6 +5,7 @@
 //!     -> Publisher (status bits, feeding rule, heartbeat) -> RegisterBank (watch: latest block)
 //!         -> Modbus TCP/RTU server tasks (PLC polls) | client task (FC16 per update) | serial line
 //!     -> Shared health <- console thread, keepalive task, live view
+//!     -> HistorySender (bounded, drop and count) -> fme-history thread -> day files (docs/history.md)
 //! ```
 //! The pipeline thread pings the systemd watchdog each loop turn (a stuck `Pipeline::process` stops
 //! the pings and systemd restarts the service); a camera outage does not (the loop keeps turning).
@@ -64,6 +65,19 @@ pub fn build_pipeline(cfg: &Config) -> Result<Box<dyn Pipeline>, ServiceError> {
     }
     let p = FishPipeline::new(cfg, calibration).map_err(ServiceError::Pipeline)?;
     Ok(Box::new(p))
+}
+
+/// The activity history's directory (`docs/history.md`): `history.dir` if set, else `history/` in
+/// the state directory ([`crate::status::state_dir`]: `$STATE_DIRECTORY`, else
+/// `service.state_dir`); `None` (history off) when neither is set or `history.enabled` is false.
+pub fn history_dir(cfg: &Config) -> Option<std::path::PathBuf> {
+    if !cfg.history.enabled {
+        return None;
+    }
+    if !cfg.history.dir.as_os_str().is_empty() {
+        return Some(cfg.history.dir.clone());
+    }
+    crate::status::state_dir(cfg).map(|d| d.join("history"))
 }
 
 /// Run-time options not in the config file.
@@ -256,7 +270,8 @@ struct PipelineCtx {
     serial_tx: Option<std::sync::mpsc::SyncSender<String>>,
     output_period_s: f64,
     max_frames: Option<u64>,
-    series: Option<crate::pipeline::SeriesWriter>,
+    series: Option<std::sync::mpsc::SyncSender<crate::pipeline::SeriesRow>>,
+    series_dropped: u64,
     watchdog: Option<Duration>,
     finished: tokio::sync::watch::Sender<bool>,
     recorder: Option<crate::record::Recorder>,
@@ -297,12 +312,21 @@ fn pipeline_loop(mut c: PipelineCtx) {
         let calib = c.pipeline.calib();
         let sample = match result {
             Ok(s) => {
-                if let (Some(w), Some(sample)) = (c.series.as_mut(), s) {
+                if let (Some(tx), Some(sample)) = (&c.series, s) {
+                    // The writer thread has the disk; the pipeline never waits on it.
                     let row = crate::pipeline::SeriesRow { frame: frame.seq + 1, sample };
-                    if let Err(e) = w.write(&row) {
-                        // Recording the series must never stop the pipeline: stop writing instead.
-                        c.shared.log(Level::ERROR, format!("--series: {e}; no more rows are written"));
-                        c.series = None;
+                    match tx.try_send(row) {
+                        Ok(()) => {}
+                        Err(std::sync::mpsc::TrySendError::Full(_)) => {
+                            c.series_dropped += 1;
+                            if c.series_dropped == 1 || c.series_dropped.is_multiple_of(1000) {
+                                c.shared.log(
+                                    Level::WARN,
+                                    format!("--series: {} rows dropped (disk slow)", c.series_dropped),
+                                );
+                            }
+                        }
+                        Err(std::sync::mpsc::TrySendError::Disconnected(_)) => c.series = None,
                     }
                 }
                 s
@@ -367,9 +391,7 @@ fn pipeline_loop(mut c: PipelineCtx) {
             break;
         }
     }
-    if let Some(Err(e)) = c.series.take().map(crate::pipeline::SeriesWriter::finish) {
-        c.shared.log(Level::ERROR, format!("--series: {e}"));
-    }
+    drop(c.series.take()); // the writer thread drains what is queued and finishes the file
     if let Some(r) = c.recorder.as_mut() {
         r.close();
     }
@@ -386,7 +408,7 @@ impl Daemon {
         pipeline: Box<dyn Pipeline>,
         opts: RunOptions,
     ) -> Result<Self, ServiceError> {
-        let series = match &opts.series {
+        let series_file = match &opts.series {
             Some(p) => Some(crate::pipeline::SeriesWriter::create(p, "").map_err(ServiceError::Series)?),
             None => None,
         };
@@ -395,6 +417,15 @@ impl Daemon {
         shared.with_health(|h| h.source = source.describe());
         shared.log(Level::INFO, format!("fme {} starting on {}", env!("CARGO_PKG_VERSION"), source.describe()));
         let publisher = Arc::new(Mutex::new(Publisher::new(&cfg, bank.clone())));
+        let mut other_threads = Vec::new();
+        if let Some(dir) = history_dir(&cfg) {
+            let h = &cfg.history;
+            let (tx, thread) = crate::history::spawn(dir.clone(), h.keep_days, h.fsync_s, shared.clone())
+                .map_err(|error| ServiceError::Spawn { what: "history", error })?;
+            publisher.lock().unwrap_or_else(|p| p.into_inner()).set_history(Some(tx));
+            other_threads.push(thread);
+            shared.log(Level::INFO, format!("history: one row per update in {}", dir.display()));
+        }
         // Publish a first block at once so a PLC never reads all zeros from a running box.
         let _ = publisher.lock().unwrap_or_else(|p| p.into_inner()).publish(&shared, Instant::now(), false);
 
@@ -403,7 +434,7 @@ impl Daemon {
         let modbus_addr = roles.modbus_addr;
         let (server_stops, server_tasks, client_task) = (roles.server_stops, roles.server_tasks, roles.client_task);
         let serial_tx = roles.serial_tx;
-        let mut other_threads: Vec<_> = roles.serial_thread.into_iter().collect();
+        other_threads.extend(roles.serial_thread);
         if cfg.console.enabled {
             let (dev, baud, echo, sh, bk) =
                 (cfg.console.device.clone(), cfg.console.baud, cfg.console.echo, shared.clone(), bank.clone());
@@ -429,6 +460,26 @@ impl Daemon {
                 .map_err(|error| ServiceError::Spawn { what: "capture", error })?,
         );
         let watchdog = if cfg.service.systemd_notify { sd_notify::watchdog_enabled() } else { None };
+        // `--series`: a writer thread with a bounded queue, so the pipeline never waits on the disk.
+        let series = match series_file {
+            Some(mut w) => {
+                let (tx, rx) = std::sync::mpsc::sync_channel::<crate::pipeline::SeriesRow>(4096);
+                let sh = shared.clone();
+                other_threads.push(
+                    std::thread::Builder::new()
+                        .name("fme-series".into())
+                        .spawn(move || {
+                            let result = rx.iter().try_for_each(|row| w.write(&row)).and_then(|()| w.finish());
+                            if let Err(e) = result {
+                                sh.log(Level::ERROR, format!("--series: {e}; no more rows are written"));
+                            }
+                        })
+                        .map_err(|error| ServiceError::Spawn { what: "series writer", error })?,
+                );
+                Some(tx)
+            }
+            None => None,
+        };
         let (finished_tx, finished) = tokio::sync::watch::channel(false);
         let mut recorder = crate::record::Recorder::start(&cfg, shared.clone());
         if let Some(t) = recorder.as_mut().and_then(crate::record::Recorder::take_thread) {
@@ -443,6 +494,7 @@ impl Daemon {
             output_period_s: 1.0 / cfg.output.rate_hz,
             max_frames: opts.max_frames,
             series,
+            series_dropped: 0,
             watchdog,
             finished: finished_tx,
             recorder,
@@ -562,6 +614,8 @@ impl Daemon {
             if let Some(tx) = &self.serial_tx {
                 let _ = tx.try_send(line.to_string());
             }
+            // The "stopped" row is the history's last: the writer drains, fsyncs and ends.
+            p.set_history(None);
         }
         let _ = self.stop_tx.send(true);
         if let Some(t) = self.client_task.take() {

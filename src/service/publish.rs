@@ -27,6 +27,8 @@ pub struct Publisher {
     line: String,
     /// Latched once the "stopped" block is published: a frame still in flight must not overwrite it.
     stopped: bool,
+    /// Every published update also goes to the history writer (never waits; `docs/history.md`).
+    history: Option<crate::history::HistorySender>,
 }
 
 impl Publisher {
@@ -43,7 +45,14 @@ impl Publisher {
             last_publish: None,
             line: String::with_capacity(128),
             stopped: false,
+            history: None,
         }
+    }
+
+    /// Sends every later update to the history writer (`None`: stop sending, which lets the writer
+    /// finish once it has written what it holds).
+    pub fn set_history(&mut self, tx: Option<crate::history::HistorySender>) {
+        self.history = tx;
     }
 
     /// Computes the register inputs at `now` (pure apart from advancing the heartbeat and feeding rule).
@@ -148,6 +157,19 @@ impl Publisher {
             inp
         });
         bank.publish(registers::encode(&inp, self.order));
+        if let Some(h) = &self.history {
+            h.send(crate::history::Row {
+                unix_ms: crate::history::now_unix_ms(),
+                activity_mps: inp.mean_mps,
+                smoothed_mps: inp.smoothed_mps,
+                ci95_mps: inp.ci95_half_mps,
+                n_fish: inp.fish,
+                bls: inp.mean_bls,
+                status: inp.status,
+                fault: inp.fault as u16,
+                feeding: inp.feeding,
+            });
+        }
         self.last_publish = Some(now);
         crate::output::serial_line::format_line(&inp, &mut self.line);
         &self.line

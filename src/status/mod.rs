@@ -9,8 +9,9 @@ pub use state_dir::state_dir;
 
 use crate::pipeline::{ActivitySample, CalibInfo, StageHealth};
 use std::collections::VecDeque;
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
 
 /// Frame-to-register latency histogram: 1 ms buckets up to 1 s, one overflow bucket. Fixed size.
@@ -193,6 +194,42 @@ impl Health {
     }
 }
 
+/// The activity history's state (`docs/history.md`): its directory, set once when the writer
+/// starts (the console's `history` reads it), and its counters.
+#[derive(Debug, Default)]
+pub struct HistoryStatus {
+    dir: OnceLock<PathBuf>,
+    /// Rows written.
+    pub written: AtomicU64,
+    /// Rows dropped because the writer's queue was full (the disk was too slow).
+    pub dropped: AtomicU64,
+    /// Rows not written because of a write error (disk full, read-only) or while paused after one.
+    pub failed: AtomicU64,
+    /// Paused after a write error (retried later).
+    pub paused: AtomicBool,
+}
+
+impl HistoryStatus {
+    /// Records the history directory (the first call wins).
+    pub fn set_dir(&self, dir: &Path) {
+        let _ = self.dir.set(dir.to_path_buf());
+    }
+
+    /// The history directory, if the history is on.
+    pub fn dir(&self) -> Option<&Path> {
+        self.dir.get().map(PathBuf::as_path)
+    }
+
+    /// One line for the console's `status`: `off`, `on DIR` or `paused DIR`.
+    pub fn describe(&self) -> String {
+        match self.dir() {
+            None => "off".into(),
+            Some(d) if self.paused.load(Ordering::Relaxed) => format!("paused (write error) {}", d.display()),
+            Some(d) => format!("on {}", d.display()),
+        }
+    }
+}
+
 /// State shared by every thread and task of the daemon.
 #[derive(Debug)]
 pub struct Shared {
@@ -204,6 +241,8 @@ pub struct Shared {
     /// Console-to-service requests.
     pub requests: Requests,
     stopping: AtomicBool,
+    /// The activity history's directory and counters.
+    pub history: HistoryStatus,
 }
 
 impl Shared {
@@ -216,6 +255,7 @@ impl Shared {
             config_text,
             requests: Requests::default(),
             stopping: AtomicBool::new(false),
+            history: HistoryStatus::default(),
         }
     }
 
@@ -263,6 +303,27 @@ impl Shared {
     }
 }
 
+/// Fault code of register 11: the most severe current problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u16)]
+pub enum FaultCode {
+    /// 0: no fault.
+    #[default]
+    None = 0,
+    /// 1: camera lost or stalled (reconnecting).
+    Camera = 1,
+    /// 2: detector failed.
+    Detector = 2,
+    /// 3: depth network failed.
+    Depth = 3,
+    /// 4: pipeline stalled (no frame processed within `service.stall_after_s`).
+    PipelineStalled = 4,
+    /// 5: PLC link down (client modes).
+    PlcLink = 5,
+    /// 6: the daemon has stopped (final write before exit).
+    Stopped = 6,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -291,25 +352,4 @@ mod tests {
         assert!(l[0].ends_with("m2") && l[2].ends_with("m4"), "{l:?}");
         assert_eq!(s.last_logs(1).len(), 1);
     }
-}
-
-/// Fault code of register 11: the most severe current problem.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[repr(u16)]
-pub enum FaultCode {
-    /// 0: no fault.
-    #[default]
-    None = 0,
-    /// 1: camera lost or stalled (reconnecting).
-    Camera = 1,
-    /// 2: detector failed.
-    Detector = 2,
-    /// 3: depth network failed.
-    Depth = 3,
-    /// 4: pipeline stalled (no frame processed within `service.stall_after_s`).
-    PipelineStalled = 4,
-    /// 5: PLC link down (client modes).
-    PlcLink = 5,
-    /// 6: the daemon has stopped (final write before exit).
-    Stopped = 6,
 }

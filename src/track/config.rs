@@ -17,7 +17,7 @@ pub enum Mode {
 /// The base settings a `[tracker]` section starts from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
-pub enum Preset {
+pub enum TrackerPreset {
     /// ByteTrack-style two-stage association on a constant-velocity filter (our best).
     #[default]
     Default,
@@ -31,22 +31,22 @@ pub enum Preset {
 #[serde(try_from = "Patch")]
 pub struct TrackerConfig {
     /// The base the other keys override: `default` or `sort`.
-    pub preset: Preset,
+    pub preset: TrackerPreset,
     /// Association algorithm.
     pub mode: Mode,
     /// `T_d`: detections scoring below this are ignored.
-    pub det_thresh: f64,
+    pub det_threshold: f64,
     /// `T_t`: detections at or above this score are "high" (first stage, may start tracks); the
-    /// others (at or above `det_thresh`) only extend existing tracks in the second stage.
-    pub track_thresh: f64,
+    /// others (at or above `det_threshold`) only extend existing tracks in the second stage.
+    pub track_threshold: f64,
     /// `T_unt`: minimum score of an unmatched ("untracked") detection to start a new track.
-    pub new_track_thresh: f64,
+    pub new_track_threshold: f64,
     /// `T_iou`: minimum IoU between a predicted track box and a detection in the first stage.
     pub iou_threshold: f64,
     /// Minimum IoU in the second (low-score) stage.
-    pub low_iou_thresh: f64,
+    pub low_iou_threshold: f64,
     /// `T_unc`: minimum IoU to extend an unconfirmed (tentative) track.
-    pub unconfirmed_iou_thresh: f64,
+    pub unconfirmed_iou_threshold: f64,
     /// Hits needed to confirm a track (SORT: consecutive hits, `min_hits`).
     pub min_hits: u32,
     /// Byte mode: how long a lost track is kept for recovery, seconds.
@@ -73,14 +73,14 @@ impl TrackerConfig {
     /// Exact SORT: `max_age = 1`, `min_hits = 3`, `iou_threshold = 0.3`, no score threshold.
     pub fn sort() -> Self {
         Self {
-            preset: Preset::Sort,
+            preset: TrackerPreset::Sort,
             mode: Mode::Sort,
-            det_thresh: f64::NEG_INFINITY,
-            track_thresh: f64::NEG_INFINITY,
-            new_track_thresh: f64::NEG_INFINITY,
+            det_threshold: f64::NEG_INFINITY,
+            track_threshold: f64::NEG_INFINITY,
+            new_track_threshold: f64::NEG_INFINITY,
             iou_threshold: 0.3,
-            low_iou_thresh: 0.3,
-            unconfirmed_iou_thresh: 0.3,
+            low_iou_threshold: 0.3,
+            unconfirmed_iou_threshold: 0.3,
             min_hits: 3,
             max_age_s: 0.0,
             max_age_frames: 1,
@@ -96,14 +96,14 @@ impl TrackerConfig {
     /// Our best settings (found with `fme tune` and on mot15; docs/accuracy.md, "Tracking").
     pub fn default_preset() -> Self {
         Self {
-            preset: Preset::Default,
+            preset: TrackerPreset::Default,
             mode: Mode::Byte,
-            det_thresh: 0.1,
-            track_thresh: 0.5,
-            new_track_thresh: 0.8,
+            det_threshold: 0.1,
+            track_threshold: 0.5,
+            new_track_threshold: 0.8,
             iou_threshold: 0.2,
-            low_iou_thresh: 0.5,
-            unconfirmed_iou_thresh: 0.3,
+            low_iou_threshold: 0.5,
+            unconfirmed_iou_threshold: 0.3,
             min_hits: 2,
             max_age_s: 1.0,
             max_age_frames: 30,
@@ -117,10 +117,10 @@ impl TrackerConfig {
     }
 
     /// The settings of a preset.
-    pub fn preset(preset: Preset) -> Self {
+    pub fn preset(preset: TrackerPreset) -> Self {
         match preset {
-            Preset::Sort => Self::sort(),
-            Preset::Default => Self::default_preset(),
+            TrackerPreset::Sort => Self::sort(),
+            TrackerPreset::Default => Self::default_preset(),
         }
     }
 
@@ -134,10 +134,10 @@ impl TrackerConfig {
             }
         };
         unit("iou_threshold", self.iou_threshold)?;
-        unit("low_iou_thresh", self.low_iou_thresh)?;
-        unit("unconfirmed_iou_thresh", self.unconfirmed_iou_thresh)?;
-        if self.det_thresh.is_nan() || self.track_thresh.is_nan() || self.new_track_thresh.is_nan() {
-            return Err(TrackerConfigError::Key("det_thresh".into(), "score thresholds must not be NaN".into()));
+        unit("low_iou_threshold", self.low_iou_threshold)?;
+        unit("unconfirmed_iou_threshold", self.unconfirmed_iou_threshold)?;
+        if self.det_threshold.is_nan() || self.track_threshold.is_nan() || self.new_track_threshold.is_nan() {
+            return Err(TrackerConfigError::Key("det_threshold".into(), "score thresholds must not be NaN".into()));
         }
         if !(self.max_age_s >= 0.0 && self.max_age_s.is_finite()) {
             return Err(TrackerConfigError::Key(
@@ -189,14 +189,14 @@ impl Default for TrackerConfig {
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Patch {
-    preset: Option<Preset>,
+    preset: Option<TrackerPreset>,
     mode: Option<Mode>,
-    det_thresh: Option<f64>,
-    track_thresh: Option<f64>,
-    new_track_thresh: Option<f64>,
+    det_threshold: Option<f64>,
+    track_threshold: Option<f64>,
+    new_track_threshold: Option<f64>,
     iou_threshold: Option<f64>,
-    low_iou_thresh: Option<f64>,
-    unconfirmed_iou_thresh: Option<f64>,
+    low_iou_threshold: Option<f64>,
+    unconfirmed_iou_threshold: Option<f64>,
     min_hits: Option<u32>,
     max_age_s: Option<f64>,
     max_age_frames: Option<u32>,
@@ -221,7 +221,15 @@ impl Patch {
         macro_rules! set {
             ($($k:ident),*) => { $( if let Some(v) = self.$k { c.$k = v; } )* };
         }
-        set!(mode, det_thresh, track_thresh, new_track_thresh, iou_threshold, low_iou_thresh, unconfirmed_iou_thresh);
+        set!(
+            mode,
+            det_threshold,
+            track_threshold,
+            new_track_threshold,
+            iou_threshold,
+            low_iou_threshold,
+            unconfirmed_iou_threshold
+        );
         set!(min_hits, max_age_s, max_age_frames, fuse_score, depth_weight, buffer_rate, buffer_max, noise, max_tracks);
         c.validate()?;
         Ok(c)
@@ -239,11 +247,11 @@ mod tests {
     #[test]
     fn keys_override_the_preset_and_unknown_keys_are_rejected() {
         let c = parse("preset = \"sort\"\niou_threshold = 0.5\n").expect("valid");
-        assert_eq!((c.preset, c.mode, c.iou_threshold, c.min_hits), (Preset::Sort, Mode::Sort, 0.5, 3));
+        assert_eq!((c.preset, c.mode, c.iou_threshold, c.min_hits), (TrackerPreset::Sort, Mode::Sort, 0.5, 3));
         let e = parse("iou_tresh = 0.5").expect_err("typo");
         assert!(e.contains("iou_tresh"), "{e}");
         let c = parse("iou_threshold = 0.4\nmax_age_s = 2.0\nmax_tracks = 64\n").expect("keys");
-        assert_eq!((c.preset, c.iou_threshold, c.max_age_s, c.max_tracks), (Preset::Default, 0.4, 2.0, 64));
+        assert_eq!((c.preset, c.iou_threshold, c.max_age_s, c.max_tracks), (TrackerPreset::Default, 0.4, 2.0, 64));
         assert!(parse("max_tracks = 129").is_err());
         let e = parse("iou_threshold = 1.5").expect_err("range");
         assert!(e.contains("iou_threshold"), "{e}");

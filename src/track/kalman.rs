@@ -89,7 +89,7 @@ impl SortKalman {
 
 /// Noise parameters of [`CvKalman`], all relative to the box height `h` (pixels).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct CvNoise {
     /// Standard deviation of a measured coordinate, as a fraction of `h`.
     pub meas: f64,

@@ -35,10 +35,10 @@
 //! # The paper's Table 1 as configuration keys
 //! | paper | symbol | key | meaning here |
 //! |---|---|---|---|
-//! | Detection Thres | `T_d` | `det_thresh` | detections below are dropped |
-//! | Tracking Thres | `T_t` | `track_thresh` | high/low score split of the two-stage association |
-//! | Untracked Thres | `T_unt` | `new_track_thresh` | minimum score of an unmatched detection to start a track |
-//! | Unconfirmed Thres | `T_unc` | `unconfirmed_iou_thresh` | minimum IoU to extend a tentative track |
+//! | Detection Thres | `T_d` | `det_threshold` | detections below are dropped |
+//! | Tracking Thres | `T_t` | `track_threshold` | high/low score split of the two-stage association |
+//! | Untracked Thres | `T_unt` | `new_track_threshold` | minimum score of an unmatched detection to start a track |
+//! | Unconfirmed Thres | `T_unc` | `unconfirmed_iou_threshold` | minimum IoU to extend a tentative track |
 //! | IoU Thres | `T_iou` | `iou_threshold` | minimum IoU in the first stage |
 //! | Kernel Size `k`, Fusion Thres `T_f` | | - | HRNet heat-map settings of the detector, not tracker ones |
 //!
@@ -50,5 +50,5 @@ pub mod kalman;
 mod tracker;
 pub mod tune;
 
-pub use config::{Mode, Preset, TrackerConfig, TrackerConfigError};
+pub use config::{Mode, TrackerConfig, TrackerConfigError, TrackerPreset};
 pub use tracker::{Detection, MAX_DETS, MAX_TRACKS, TrackError, TrackOutput, Tracker, TrackerStats};

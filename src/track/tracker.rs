@@ -272,7 +272,7 @@ impl Tracker {
         Ok(&self.outputs)
     }
 
-    /// Copies valid detections above `det_thresh`; on overflow keeps the highest scores.
+    /// Copies valid detections above `det_threshold`; on overflow keeps the highest scores.
     fn load_detections(&mut self, detections: &[Detection]) {
         self.dets.clear();
         for d in detections {
@@ -280,7 +280,7 @@ impl Tracker {
                 self.stats.invalid_dets += 1;
                 continue;
             }
-            if d.score < self.cfg.det_thresh {
+            if d.score < self.cfg.det_threshold {
                 continue;
             }
             let mut d = *d;
@@ -594,15 +594,15 @@ impl Tracker {
         let (nd, nt) = (self.dets.len(), self.tracks.len());
         self.det_used[..nd].fill(false);
         self.trk_used[..nt].fill(false);
-        let hi = c.track_thresh;
+        let hi = c.track_threshold;
         // 1: confirmed and lost tracks with high-score detections.
         self.stage(t, c.iou_threshold, c.fuse_score, false, |tr| tr.state != TrackState::Tentative, |d| d.score >= hi);
         // 2: still-tracked tracks with low-score detections (occluded fish score low).
-        self.stage(t, c.low_iou_thresh, false, false, |tr| tr.state == TrackState::Confirmed, |d| d.score < hi);
+        self.stage(t, c.low_iou_threshold, false, false, |tr| tr.state == TrackState::Confirmed, |d| d.score < hi);
         // 3: tentative tracks with the remaining high-score detections.
         self.stage(
             t,
-            c.unconfirmed_iou_thresh,
+            c.unconfirmed_iou_threshold,
             c.fuse_score,
             true,
             |tr| tr.state == TrackState::Tentative,
@@ -625,7 +625,7 @@ impl Tracker {
             }
         }
         for i in 0..nd {
-            if !self.det_used[i] && self.dets[i].score >= hi && self.dets[i].score >= c.new_track_thresh {
+            if !self.det_used[i] && self.dets[i].score >= hi && self.dets[i].score >= c.new_track_threshold {
                 let d = self.dets[i];
                 self.new_track(t, &d);
             }

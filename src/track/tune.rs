@@ -193,39 +193,18 @@ pub fn pooled(ms: &[MotMetrics]) -> MotMetrics {
     }
 }
 
-/// Numeric keys a grid may vary.
-pub const GRID_KEYS: &[&str] = &[
-    "det_thresh",
-    "track_thresh",
-    "new_track_thresh",
-    "iou_threshold",
-    "low_iou_thresh",
-    "unconfirmed_iou_thresh",
-    "min_hits",
-    "max_age_s",
-    "max_age_frames",
-    "depth_weight",
-    "buffer_rate",
-    "buffer_max",
-];
-
-/// Sets one numeric key; `Err` names an unknown key.
+/// Sets one numeric `[tracker]` key the way the config file does (the same serde types, names and
+/// checks: an unknown key or a value out of range is an error naming it).
 pub fn set_key(cfg: &mut TrackerConfig, key: &str, v: f64) -> Result<(), String> {
-    match key {
-        "det_thresh" => cfg.det_thresh = v,
-        "track_thresh" => cfg.track_thresh = v,
-        "new_track_thresh" => cfg.new_track_thresh = v,
-        "iou_threshold" => cfg.iou_threshold = v,
-        "low_iou_thresh" => cfg.low_iou_thresh = v,
-        "unconfirmed_iou_thresh" => cfg.unconfirmed_iou_thresh = v,
-        "min_hits" => cfg.min_hits = v.max(0.0).round() as u32,
-        "max_age_s" => cfg.max_age_s = v,
-        "max_age_frames" => cfg.max_age_frames = v.max(0.0).round() as u32,
-        "depth_weight" => cfg.depth_weight = v,
-        "buffer_rate" => cfg.buffer_rate = v,
-        "buffer_max" => cfg.buffer_max = v,
-        _ => return Err(format!("unknown grid key `{key}` (known: {})", GRID_KEYS.join(", "))),
-    }
+    let mut table = toml::Table::try_from(*cfg).map_err(|e| format!("tracker: {e}"))?;
+    let value = match table.get(key) {
+        Some(toml::Value::Integer(_)) if v >= 0.0 && v.fract() == 0.0 => toml::Value::Integer(v as i64),
+        Some(toml::Value::Integer(_)) => return Err(format!("grid key `{key}`: {v} is not a whole number >= 0")),
+        Some(toml::Value::Float(_)) => toml::Value::Float(v),
+        _ => return Err(format!("unknown grid key `{key}`: not a numeric [tracker] key")),
+    };
+    table.insert(key.to_string(), value);
+    *cfg = toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| format!("grid key `{key}` = {v}: {e}"))?;
     Ok(())
 }
 
@@ -240,10 +219,11 @@ impl Grid {
     /// The paper's Table 1 on our keys: `T_d`, `T_t`, `T_unt`, `T_unc`, `T_iou` in 30%..70%.
     pub fn paper() -> Self {
         let v = vec![0.3, 0.4, 0.5, 0.6, 0.7];
-        let axes = ["det_thresh", "track_thresh", "new_track_thresh", "unconfirmed_iou_thresh", "iou_threshold"]
-            .iter()
-            .map(|k| (k.to_string(), v.clone()))
-            .collect();
+        let axes =
+            ["det_threshold", "track_threshold", "new_track_threshold", "unconfirmed_iou_threshold", "iou_threshold"]
+                .iter()
+                .map(|k| (k.to_string(), v.clone()))
+                .collect();
         Self { axes }
     }
 
@@ -252,8 +232,6 @@ impl Grid {
         let table: toml::Table = toml::from_str(text).map_err(|e| format!("grid: {e}"))?;
         let mut axes = Vec::new();
         for (k, v) in table {
-            let mut probe = TrackerConfig::default_preset();
-            set_key(&mut probe, &k, 0.0)?;
             let num = |x: &toml::Value| x.as_float().or_else(|| x.as_integer().map(|i| i as f64));
             let vals: Vec<f64> = match &v {
                 toml::Value::Array(a) => a.iter().map(num).collect::<Option<_>>(),
@@ -262,6 +240,10 @@ impl Grid {
             .ok_or_else(|| format!("grid key `{k}`: values must be numbers"))?;
             if vals.is_empty() {
                 return Err(format!("grid key `{k}`: no values"));
+            }
+            // Each value must be one the config accepts for this key.
+            for &x in &vals {
+                set_key(&mut TrackerConfig::default_preset(), &k, x)?;
             }
             axes.push((k, vals));
         }
@@ -288,8 +270,11 @@ impl Grid {
         for (k, vals) in &self.axes {
             let v = vals[i % vals.len()];
             i /= vals.len();
-            // Keys were checked when the grid was built.
-            let _ = set_key(&mut cfg, k, v);
+            // Keys and values were checked when the grid was built; a combination the checks
+            // refuse keeps the previous value.
+            if let Err(e) = set_key(&mut cfg, k, v) {
+                tracing::warn!("{e}");
+            }
             set.push((k.clone(), v));
         }
         (cfg, set)

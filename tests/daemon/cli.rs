@@ -175,7 +175,7 @@ fn missing_model_or_onnx_runtime_is_named_at_start() {
     );
     let out = fme().args(["run", "--config"]).arg(&cfg).arg("--source").arg(&seq).output().expect("run");
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
+    assert_eq!(out.status.code(), Some(2), "a missing model is a start-up (usage) error: {err}");
     assert!(err.contains("detector.model") && err.contains("/nonexistent/fish-det.onnx"), "{err}");
     let ok = write(dir.path(), "ok.toml", "[output.modbus]\nlisten = \"127.0.0.1:0\"\n");
     let out = fme()
@@ -187,7 +187,7 @@ fn missing_model_or_onnx_runtime_is_named_at_start() {
         .output()
         .expect("run");
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
+    assert_eq!(out.status.code(), Some(2), "a missing ONNX Runtime is a start-up error: {err}");
     assert!(err.contains("ONNX Runtime") && err.contains("/nonexistent/ort/libonnxruntime.so"), "{err}");
 }
 

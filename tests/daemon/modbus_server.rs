@@ -90,9 +90,17 @@ async fn tcp_reads_writes_and_exceptions() {
     assert_eq!(back, vec![1, 7, 8, 9]);
     let e = ctx.write_multiple_registers(102, &[1, 2, 3]).await.expect("transport");
     assert_eq!(e, Err(ExceptionCode::IllegalDataAddress), "past the writable area");
-    // Quantity 0 is an illegal data value.
-    let e = ctx.read_input_registers(0, 0).await;
-    assert!(!matches!(e, Ok(Ok(_))), "zero-length read must not succeed: {e:?}");
+    // Quantity 0 and 126 are illegal data values (exception 03), sent raw: the client library
+    // would refuse to send them.
+    for qty in [0u16, 126] {
+        use tokio::io::{AsyncReadExt, AsyncWriteExt};
+        let mut raw = tokio::net::TcpStream::connect(addr).await.expect("connect raw");
+        let q = qty.to_be_bytes();
+        raw.write_all(&[0, 7, 0, 0, 0, 6, 1, 0x04, 0, 0, q[0], q[1]]).await.expect("send");
+        let mut reply = [0u8; 9];
+        tokio::time::timeout(Duration::from_secs(2), raw.read_exact(&mut reply)).await.expect("reply").expect("read");
+        assert_eq!(reply, [0, 7, 0, 0, 0, 3, 1, 0x84, 0x03], "quantity {qty}: exception 03");
+    }
 
     let c = bank.counters();
     assert!(c.requests >= 15 && c.exceptions >= 8, "{c:?}");

@@ -1,5 +1,5 @@
 //! Helpers shared by the daemon, Modbus and console tests of this test binary (and by
-//! `daemon_alloc`, which needs a test binary of its own for its counting allocator).
+//! `daemon_alloc` and `daemon_watchdog`, which need binaries of their own).
 #![allow(dead_code)]
 
 use fme::config::{Config, ModbusMode};

@@ -2,7 +2,8 @@
 //! fault code 4 "pipeline stalled" in the registers, while the rest of the daemon keeps running.
 //! Alone in its test binary because it sets NOTIFY_SOCKET / WATCHDOG_USEC for the process.
 
-use crate::support;
+#[path = "daemon/support.rs"]
+mod support;
 
 use fme::capture::{Frame, FrameSource, RecordedSource};
 use fme::output::registers::FaultCode;

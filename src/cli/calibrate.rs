@@ -1,0 +1,412 @@
+//! `fme calibrate`: the camera's pose (and intrinsics, when not given) from reference objects the
+//! divers measured, written as the calibration file `camera.calibration` reads; `--check` tells
+//! whether the camera has moved since. See docs/calibration.md.
+
+use super::{UsageError, write_stdout};
+use crate::calib::{self, Options, Reference, Residual};
+use crate::geometry::{Camera, Intrinsics, Pixel, WorldPoint};
+use crate::pipeline::Calibration;
+use crate::sequence::{CameraMeta, ReferenceObject};
+use anyhow::Context;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `fme calibrate`.
+#[derive(Debug, clap::Args)]
+#[command(after_help = "Underwater behind a flat port the focal length is about 1.33x the in-air value (the \
+                        refractive index of water): multiply in-air fx and fy by 1.33, or give no intrinsics \
+                        and let six or more non-coplanar references estimate them. See docs/calibration.md.")]
+pub struct CalibrateArgs {
+    /// The frame the references were marked on (PNG or JPEG); gives the image size and the overlay's
+    /// background. With --source: where the grabbed frame is written.
+    #[arg(long, value_name = "IMG")]
+    pub frame: PathBuf,
+    /// Grab the frame from this V4L2 camera (at `source.width` x `source.height` and
+    /// `source.format` of the configuration: --config, --set) and write it to --frame. Without
+    /// --points, stop there: mark the references on that image, then run again with --frame.
+    #[arg(long, value_name = "/dev/videoN")]
+    pub source: Option<PathBuf>,
+    /// The configuration (only the `source` section is used, with --source).
+    #[command(flatten)]
+    pub config: super::ConfigArgs,
+    /// The references: CSV with header `name,x,y,z,u,v` (face centre in world metres, z up; the pixel
+    /// where it appears, u right, v down).
+    #[arg(long, value_name = "CSV", required_unless_present = "source")]
+    pub points: Option<PathBuf>,
+    /// Intrinsics from any JSON file with a `camera` block (fx, fy, cx, cy, distortion): a calibration
+    /// file or a sequence's meta.json. Without it and without --fx.., fx = fy, cx and cy are estimated
+    /// (six or more non-coplanar references).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["fx", "fy", "cx", "cy"])]
+    pub intrinsics: Option<PathBuf>,
+    /// Focal length along u, pixels (with --fy --cx --cy; no distortion). Underwater behind a flat
+    /// port: about 1.33x the in-air value.
+    #[arg(long, requires_all = ["fy", "cx", "cy"])]
+    pub fx: Option<f64>,
+    /// Focal length along v, pixels.
+    #[arg(long, requires_all = ["fx", "cx", "cy"])]
+    pub fy: Option<f64>,
+    /// Principal point u, pixels.
+    #[arg(long, requires_all = ["fx", "fy", "cy"])]
+    pub cx: Option<f64>,
+    /// Principal point v, pixels.
+    #[arg(long, requires_all = ["fx", "fy", "cx"])]
+    pub cy: Option<f64>,
+    /// Where to write the calibration (JSON, the format of a sequence's meta.json).
+    #[arg(long, value_name = "CALIB.json", required_unless_present_any = ["check", "source"], conflicts_with = "check")]
+    pub out: Option<PathBuf>,
+    /// Also draw the frame with marked (green crosses) and reprojected (red circles) references and
+    /// the world axes (x red, y green, z blue, 1 m from the origin and from the references' centroid) to this PNG.
+    #[arg(long, value_name = "PNG")]
+    pub overlay: Option<PathBuf>,
+    /// Check an existing calibration against freshly marked points instead of solving: exit 0 when
+    /// their reprojection error is within --max-rms, exit 1 when the camera (or a reference) moved.
+    #[arg(long, value_name = "CALIB", conflicts_with_all = ["intrinsics", "fx"])]
+    pub check: Option<PathBuf>,
+    /// Largest acceptable RMS reprojection error, pixels.
+    #[arg(long, default_value_t = 3.0, value_name = "PX")]
+    pub max_rms: f64,
+    /// Edge length of the reference cubes, metres, written as `size_m` (their centre is put half an
+    /// edge behind the measured face, away from the camera). 0: points, not cubes.
+    #[arg(long, default_value_t = 0.0, value_name = "M")]
+    pub ref_size: f64,
+}
+
+/// The intrinsics part of any file's `camera` block (other keys ignored).
+#[derive(Debug, serde::Deserialize)]
+struct IntrinsicsBlock {
+    fx: f64,
+    fy: f64,
+    cx: f64,
+    cy: f64,
+    #[serde(default)]
+    distortion: [f64; 5],
+}
+
+#[derive(Debug, serde::Deserialize)]
+struct IntrinsicsFile {
+    camera: IntrinsicsBlock,
+}
+
+/// What `fme calibrate` writes besides the `camera` block and `reference_objects`.
+#[derive(Debug, serde::Serialize)]
+struct CalibrateInfo {
+    frame: String,
+    points: String,
+    names: Vec<String>,
+    rms_px: f64,
+    max_rms_px: f64,
+    error_px: Vec<f64>,
+    estimated_intrinsics: bool,
+}
+
+#[derive(Debug, serde::Serialize)]
+struct CalibrationOut {
+    width: u32,
+    height: u32,
+    camera: CameraMeta,
+    reference_objects: Vec<ReferenceObject>,
+    calibrate: CalibrateInfo,
+}
+
+fn usage(msg: impl Into<String>) -> anyhow::Error {
+    anyhow::Error::new(UsageError(msg.into()))
+}
+
+fn read_intrinsics(path: &Path) -> anyhow::Result<Intrinsics> {
+    let text = std::fs::read_to_string(path).map_err(|e| usage(format!("--intrinsics {}: {e}", path.display())))?;
+    let f: IntrinsicsFile = serde_json::from_str(&text)
+        .map_err(|e| usage(format!("--intrinsics {}: no `camera` block with fx, fy, cx, cy: {e}", path.display())))?;
+    let c = f.camera;
+    let k = Intrinsics { fx: c.fx, fy: c.fy, cx: c.cx, cy: c.cy, distortion: c.distortion };
+    k.validate().map_err(|e| usage(format!("--intrinsics {}: camera: {e}", path.display())))?;
+    Ok(k)
+}
+
+fn read_points(path: &Path) -> anyhow::Result<Vec<Reference>> {
+    let text = std::fs::read_to_string(path).map_err(|e| usage(format!("--points {}: {e}", path.display())))?;
+    calib::parse_points(&text).map_err(|e| usage(format!("--points {}: {e}", path.display())))
+}
+
+fn read_frame(path: &Path) -> anyhow::Result<image::RgbImage> {
+    let img = image::open(path).map_err(|e| usage(format!("--frame {}: {e}", path.display())))?;
+    Ok(img.to_rgb8())
+}
+
+/// Runs `fme calibrate`.
+pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
+    if !(args.max_rms.is_finite() && args.max_rms > 0.0) {
+        return Err(usage(format!("--max-rms must be a positive number of pixels, got {}", args.max_rms)));
+    }
+    if !(args.ref_size.is_finite() && args.ref_size >= 0.0) {
+        return Err(usage(format!("--ref-size must be 0 or a positive length in metres, got {}", args.ref_size)));
+    }
+    let frame = match &args.source {
+        Some(dev) => grab(dev, &args.config, &args.frame)?,
+        None => read_frame(&args.frame)?,
+    };
+    let Some(points) = &args.points else {
+        return write_stdout(&format!(
+            "wrote {} ({}x{}); mark the references on it and run fme calibrate --frame {} --points CSV ...\n",
+            args.frame.display(),
+            frame.width(),
+            frame.height(),
+            args.frame.display()
+        ));
+    };
+    let refs = read_points(points)?;
+    let opts = Options { max_rms_px: args.max_rms, width: frame.width(), height: frame.height() };
+    if let Some(calib_path) = &args.check {
+        return check(calib_path, &refs, &opts, &frame, args.overlay.as_deref());
+    }
+    let intrinsics = match (&args.intrinsics, args.fx, args.fy, args.cx, args.cy) {
+        (Some(p), ..) => Some(read_intrinsics(p)?),
+        (None, Some(fx), Some(fy), Some(cx), Some(cy)) => {
+            let k = Intrinsics { fx, fy, cx, cy, distortion: [0.0; 5] };
+            k.validate().map_err(|e| usage(format!("--fx/--fy/--cx/--cy: {e}")))?;
+            Some(k)
+        }
+        _ => None,
+    };
+    let sol =
+        calib::calibrate(&refs, intrinsics.as_ref(), &opts).map_err(|e| usage(format!("{}: {e}", points.display())))?;
+    let out = args.out.as_deref().ok_or_else(|| usage("--out is required"))?;
+    let cam = sol.camera;
+    let centre = cam.pose.camera_center();
+    let reference_objects = refs
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let away = (r.world.0 - centre.0).try_normalize(1e-9).unwrap_or_default();
+            let c = r.world.0 + away * (0.5 * args.ref_size);
+            ReferenceObject {
+                id: i as u32 + 1,
+                size_m: args.ref_size,
+                center_w: c.into(),
+                front_face_center_w: r.world.0.into(),
+            }
+        })
+        .collect();
+    let file = CalibrationOut {
+        width: opts.width,
+        height: opts.height,
+        camera: CameraMeta::from_camera(&cam),
+        reference_objects,
+        calibrate: CalibrateInfo {
+            frame: args.frame.display().to_string(),
+            points: points.display().to_string(),
+            names: refs.iter().map(|r| r.name.clone()).collect(),
+            rms_px: sol.rms_px,
+            max_rms_px: args.max_rms,
+            error_px: sol.residuals.iter().map(|r| r.error_px).collect(),
+            estimated_intrinsics: sol.estimated_intrinsics,
+        },
+    };
+    let mut text = serde_json::to_string_pretty(&file).context("encoding the calibration")?;
+    text.push('\n');
+    std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
+    // Read back through the loader the daemon uses, so a file that it would reject is caught here.
+    Calibration::load(out).map_err(|e| anyhow::anyhow!("the written calibration does not load: {e}"))?;
+    if let Some(p) = &args.overlay {
+        overlay(frame, &cam, &refs, &sol.residuals, p)?;
+    }
+    let mut s = table(&refs, &sol.residuals);
+    let k = &cam.intrinsics;
+    let _ = writeln!(
+        s,
+        "RMS {:.2} px over {} references (limit {} px); start: {}",
+        sol.rms_px,
+        refs.len(),
+        args.max_rms,
+        sol.start
+    );
+    let _ = writeln!(
+        s,
+        "camera centre ({:.3}, {:.3}, {:.3}) m; fx {:.1} fy {:.1} cx {:.1} cy {:.1} px{}",
+        centre.0.x,
+        centre.0.y,
+        centre.0.z,
+        k.fx,
+        k.fy,
+        k.cx,
+        k.cy,
+        if sol.estimated_intrinsics { " (estimated)" } else { "" }
+    );
+    let _ = writeln!(s, "wrote {}", out.display());
+    write_stdout(&s)
+}
+
+/// Grabs one frame from a V4L2 camera (after a few to let exposure settle) and writes it to `out`.
+fn grab(dev: &Path, config: &super::ConfigArgs, out: &Path) -> anyhow::Result<image::RgbImage> {
+    use crate::capture::{CaptureError, FrameSource, V4l2Source};
+    let (cfg, _) = config.load(&[super::set_text("source.path", &dev.to_string_lossy())])?;
+    let mut cam = V4l2Source::new(cfg.source.clone());
+    cam.reopen().map_err(|e| match e {
+        e @ (CaptureError::NotFound { .. } | CaptureError::Open { .. }) => usage(format!("--source: {e}")),
+        e => anyhow::Error::new(e).context("--source"),
+    })?;
+    let mut f = cam.next_frame(Vec::new()).context("--source: grabbing a frame")?;
+    for _ in 0..5 {
+        f = cam.next_frame(std::mem::take(&mut f.data)).context("--source: grabbing a frame")?;
+    }
+    let mut rgb = Vec::new();
+    let (w, h) = f.to_rgb_into(&mut rgb).map_err(|e| anyhow::anyhow!("--source: decoding the frame: {e}"))?;
+    let img = image::RgbImage::from_raw(w, h, rgb).ok_or_else(|| anyhow::anyhow!("--source: frame size mismatch"))?;
+    img.save(out).with_context(|| format!("writing the grabbed frame to {}", out.display()))?;
+    Ok(img)
+}
+
+/// The per-reference table: reprojection error in pixels and in metres at the reference's depth.
+fn table(refs: &[Reference], res: &[Residual]) -> String {
+    let w = refs.iter().map(|r| r.name.len()).max().unwrap_or(4).max(9);
+    let mut s = format!(
+        "{:<w$} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9} {:>9}\n",
+        "reference", "x_m", "y_m", "z_m", "u_px", "v_px", "depth_m", "error_px", "error_m"
+    );
+    for (r, e) in refs.iter().zip(res) {
+        let p = r.world.0;
+        let _ = writeln!(
+            s,
+            "{:<w$} {:>8.3} {:>8.3} {:>8.3} {:>8.1} {:>8.1} {:>8.2} {:>9.2} {:>9.4}",
+            r.name, p.x, p.y, p.z, r.pixel.u, r.pixel.v, e.depth_m, e.error_px, e.error_m
+        );
+    }
+    s
+}
+
+/// `--check`: the stored calibration against freshly marked points.
+fn check(
+    calib_path: &Path,
+    refs: &[Reference],
+    opts: &Options,
+    frame: &image::RgbImage,
+    overlay_path: Option<&Path>,
+) -> anyhow::Result<()> {
+    let stored = Calibration::load(calib_path).map_err(|e| usage(format!("--check {e}")))?;
+    if refs.is_empty() {
+        return Err(usage("--points: no references"));
+    }
+    for r in refs {
+        let (u, v) = (r.pixel.u, r.pixel.v);
+        if !(0.0..=f64::from(opts.width)).contains(&u) || !(0.0..=f64::from(opts.height)).contains(&v) {
+            return Err(usage(format!(
+                "{}: pixel ({u}, {v}) is outside the {}x{} image",
+                r.label(),
+                opts.width,
+                opts.height
+            )));
+        }
+    }
+    let (res, rms) = calib::residuals(&stored.camera, refs);
+    if let Some(p) = overlay_path {
+        overlay(frame.clone(), &stored.camera, refs, &res, p)?;
+    }
+    let mut s = table(refs, &res);
+    // How far the camera moved, when the points determine a pose on their own.
+    let moved =
+        calib::calibrate(refs, Some(&stored.camera.intrinsics), &Options { max_rms_px: f64::INFINITY, ..*opts })
+            .ok()
+            .map(|sol| {
+                let d = sol.camera.pose.camera_center().distance(&stored.camera.pose.camera_center()).get();
+                let a = calib::rotation_angle_deg(&sol.camera.pose.rotation, &stored.camera.pose.rotation);
+                format!("; the pose from these points is {d:.3} m and {a:.2} degrees from the stored one")
+            })
+            .unwrap_or_default();
+    if rms <= opts.max_rms_px {
+        let _ = writeln!(
+            s,
+            "camera has not moved: RMS {rms:.2} px under {} is within the limit of {} px (--max-rms){moved}",
+            calib_path.display(),
+            opts.max_rms_px
+        );
+        write_stdout(&s)
+    } else {
+        write_stdout(&s)?;
+        anyhow::bail!(
+            "camera has moved (or a reference has): RMS {rms:.2} px under {} is over the limit of {} px \
+             (--max-rms){moved}; recalibrate with fme calibrate (docs/calibration.md)",
+            calib_path.display(),
+            opts.max_rms_px
+        )
+    }
+}
+
+/// Sets a pixel when it is inside the image.
+fn put(img: &mut image::RgbImage, x: i64, y: i64, c: [u8; 3]) {
+    if x >= 0 && y >= 0 && (x as u64) < u64::from(img.width()) && (y as u64) < u64::from(img.height()) {
+        img.put_pixel(x as u32, y as u32, image::Rgb(c));
+    }
+}
+
+/// A straight line (Bresenham), clipped to the image; far-off end points are skipped.
+fn line(img: &mut image::RgbImage, a: Pixel, b: Pixel, c: [u8; 3]) {
+    let lim = 4.0 * f64::from(img.width().max(img.height()));
+    if ![a.u, a.v, b.u, b.v].iter().all(|v| v.is_finite() && v.abs() < lim) {
+        return;
+    }
+    let (mut x0, mut y0, x1, y1) = (a.u.floor() as i64, a.v.floor() as i64, b.u.floor() as i64, b.v.floor() as i64);
+    let (dx, dy) = ((x1 - x0).abs(), -(y1 - y0).abs());
+    let (sx, sy) = (if x0 < x1 { 1 } else { -1 }, if y0 < y1 { 1 } else { -1 });
+    let mut err = dx + dy;
+    loop {
+        put(img, x0, y0, c);
+        if x0 == x1 && y0 == y1 {
+            break;
+        }
+        let e2 = 2 * err;
+        if e2 >= dy {
+            err += dy;
+            x0 += sx;
+        }
+        if e2 <= dx {
+            err += dx;
+            y0 += sy;
+        }
+    }
+}
+
+/// The overlay PNG: marked references (green crosses), reprojected (red circles) joined by a yellow
+/// line, and the world axes, 1 m each (x red, y green, z blue), from the origin and from the
+/// references' centroid.
+fn overlay(
+    mut img: image::RgbImage,
+    cam: &Camera,
+    refs: &[Reference],
+    res: &[Residual],
+    path: &Path,
+) -> anyhow::Result<()> {
+    // The axes from the world origin, and (the origin is often outside the view, at a cage corner)
+    // from the references' centroid.
+    let n = refs.len().max(1) as f64;
+    let centroid = refs.iter().fold(nalgebra::Vector3::zeros(), |a, r| a + r.world.0 / n);
+    for origin in [nalgebra::Vector3::zeros(), centroid] {
+        for (axis, colour) in [(0usize, [255, 0, 0]), (1, [0, 255, 0]), (2, [0, 128, 255])] {
+            // Sampled in 3D so the part of an axis behind the camera is left out.
+            let mut prev: Option<Pixel> = None;
+            for k in 0..=100 {
+                let mut p = origin;
+                p[axis] += f64::from(k) / 100.0;
+                let px = cam.world_to_pixel(&WorldPoint(p)).ok();
+                if let (Some(a), Some(b)) = (prev, px) {
+                    line(&mut img, a, b, colour);
+                }
+                prev = px;
+            }
+        }
+    }
+    for (r, e) in refs.iter().zip(res) {
+        let m = r.pixel;
+        for d in -6..=6 {
+            let d = f64::from(d);
+            put(&mut img, (m.u + d).floor() as i64, m.v.floor() as i64, [0, 255, 0]);
+            put(&mut img, m.u.floor() as i64, (m.v + d).floor() as i64, [0, 255, 0]);
+        }
+        if let Some(p) = e.projected {
+            line(&mut img, m, p, [255, 255, 0]);
+            for k in 0..48 {
+                let a = f64::from(k) * std::f64::consts::TAU / 48.0;
+                put(&mut img, (p.u + 5.0 * a.cos()).floor() as i64, (p.v + 5.0 * a.sin()).floor() as i64, [255, 0, 0]);
+            }
+        }
+    }
+    img.save_with_format(path, image::ImageFormat::Png).with_context(|| format!("writing {}", path.display()))
+}
