@@ -73,3 +73,38 @@ fn bundled_models_track_and_measure_the_recorded_swarm() {
     assert!(f("speed_rmse_mps") < 0.03, "speed RMSE {} m/s", f("speed_rmse_mps"));
     assert!(f("speed_distcorr") > 0.9, "DistCorr {}", f("speed_distcorr"));
 }
+
+/// A recording labelled with boxes only (what a labelling tool exports in MOTChallenge format, as
+/// for a black-box recording: no `depth/`, no `gt/world.csv`) is scored for detection and
+/// tracking with the pipeline's own networks; ground-truth depth is refused with a clear message.
+#[test]
+fn a_recording_labelled_with_boxes_only_is_scored_for_tracking() {
+    let src = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/swarm20"));
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("labelled");
+    std::fs::create_dir_all(dir.join("img1")).expect("img1");
+    std::fs::create_dir_all(dir.join("gt")).expect("gt");
+    for f in ["seqinfo.ini", "meta.json", "gt/gt.txt"] {
+        std::fs::copy(src.join(f), dir.join(f)).expect("copy");
+    }
+    for e in std::fs::read_dir(src.join("img1")).expect("frames") {
+        let p = e.expect("entry").path();
+        std::fs::copy(&p, dir.join("img1").join(p.file_name().expect("name"))).expect("copy frame");
+    }
+    let fme = || std::process::Command::new(env!("CARGO_BIN_EXE_fme"));
+    let out = fme()
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["eval", "--json", "--boxes", "model", "--depth", "model", "--sequence"])
+        .arg(&dir)
+        .output()
+        .expect("run fme eval");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert!(j["mota"].as_f64().is_some_and(|m| m > 0.8), "{j}");
+    assert!(j["detection"]["recall"].as_f64().is_some_and(|r| r > 0.9), "{j}");
+    assert_eq!(j["frames"].as_u64(), Some(0), "no speed truth, nothing scored for speed: {j}");
+    assert!(j["speed_rmse_mps"].is_null(), "{j}");
+    let out = fme().args(["eval", "--boxes", "model", "--depth", "gt", "--sequence"]).arg(&dir).output().expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("depth"), "{}", String::from_utf8_lossy(&out.stderr));
+}

@@ -175,6 +175,9 @@ fn table(r: &EvalReport) -> String {
         rate(r.rates_hz[0]),
         rate(r.rates_hz[1]),
     ));
+    if r.frames == 0 {
+        lines.push("speed             not scored (the sequence has no gt/world.csv)".to_string());
+    }
     lines.push(format!("frames scored     {} (mean {:.1} fish)", r.frames, r.mean_fish));
     lines.push(format!(
         "speed RMSE m/s    {:.4} (truth at t - {:.2} s latency), {:.4} (truth at t)",

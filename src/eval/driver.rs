@@ -262,12 +262,15 @@ fn box_input(seq: &Sequence, opts: &EvalOptions) -> Result<BoxInput, EvalError> 
 
 /// Runs the evaluation: the pipeline over every frame of `seq` with `cfg`, scored.
 pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<EvalReport, EvalError> {
-    if !seq.has_depth {
+    // A recording labelled with boxes only (no `depth/`, no `gt/world.csv`) is scored for tracking
+    // and detection, with the pipeline's own depth; ground-truth depth needs the maps.
+    if !seq.has_depth && opts.depth != DepthChoice::Model {
         return Err(EvalError::Input {
             path: seq.dir.join("depth"),
-            msg: "missing: the ground-truth depth maps are needed to score depth and speed".into(),
+            msg: "missing: --depth gt and relative-gt need the ground-truth depth maps (use --depth model)".into(),
         });
     }
+    let speed_truth = !seq.world.is_empty();
     let mut cfg = cfg.clone();
     cfg.source.path = seq.dir.clone();
     cfg.source.realtime = false;
@@ -363,7 +366,7 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
             frame_gt.extend(fg.iter().map(|&(_, b, v)| (b, v)));
             detection.add_frame(pipeline.detections(), &frame_gt);
         }
-        if estimated {
+        if estimated && seq.has_depth {
             let dm = seq.read_depth(frame)?;
             to_metres(&dm, &mut gt_m);
             gt_mm = Some((dm.width as usize, dm.height as usize));
@@ -441,7 +444,7 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         r.true_mps = if r.est_mps().is_some() { truth_at(r.t() - r.row.sample.latency.0) } else { now };
     }
     let scored: Vec<&ScoredRow> = series.iter().filter(|r| r.true_mps.is_some() && r.est_mps().is_some()).collect();
-    if scored.len() < 2 {
+    if speed_truth && scored.len() < 2 {
         return Err(EvalError::NothingToScore(format!(
             "{}: only {} frame(s) have both a true and an estimated swarm speed (boxes from {boxes_name}, {} boxes in total)",
             seq.dir.display(),
@@ -459,7 +462,7 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         series.iter().filter(|r| r.est_mps().is_some()).map(|r| &r.row.sample).collect();
     let fits = pipeline.fit_stats();
     let mot_summary = score_tracks.then(|| MotSummary::from(&mot.metrics()));
-    Ok(EvalReport {
+    let mut report = EvalReport {
         sequence: seq.dir.display().to_string(),
         boxes: boxes_name,
         depth: opts.depth,
@@ -496,7 +499,14 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         detection: (opts.boxes == BoxesChoice::Model).then_some(detection),
         series,
         tracks,
-    })
+    };
+    if !speed_truth {
+        // No world.csv: the speed is not scored (NaN is `null` in the JSON).
+        report.speed_distcorr = f64::NAN;
+        report.error_ci95_mps = [f64::NAN; 2];
+        report.speed_bias_mps = f64::NAN;
+    }
+    Ok(report)
 }
 
 /// Writes a CSV file: `header`, then one line per item from `line` (empty field where a value is

@@ -25,7 +25,8 @@ pub struct Sequence {
 }
 
 impl Sequence {
-    /// Opens a sequence folder: reads `seqinfo.ini`, `meta.json`, `gt/gt.txt`, `gt/world.csv`, and
+    /// Opens a sequence folder: reads `seqinfo.ini`, `meta.json`, `gt/gt.txt`, `gt/world.csv` (when
+    /// present), and
     /// checks that sizes and frame counts agree, every frame image (and depth map, when `depth/`
     /// exists) is present, and every row's frame lies in `1..=seqLength`.
     pub fn open(dir: impl AsRef<Path>) -> Result<Self> {
@@ -49,8 +50,10 @@ impl Sequence {
         let camera = meta.camera(&meta_path)?;
         let gt_path = dir.join("gt").join("gt.txt");
         let gt = super::read_gt(&gt_path)?;
+        // `world.csv` is fme's ground-truth extra: a recording labelled with a MOTChallenge tool
+        // (boxes only) has none, and is scored for tracking and detection only.
         let world_path = dir.join("gt").join("world.csv");
-        let world = super::read_world(&world_path)?;
+        let world = if world_path.is_file() { super::read_world(&world_path)? } else { Vec::new() };
         let n = info.seq_length;
         if let Some(r) = gt.iter().find(|r| r.frame > n) {
             return Err(Error::invalid(&gt_path, format!("frame {} is beyond seqLength {n}", r.frame)));
