@@ -438,6 +438,17 @@ impl Pipeline for FishPipeline {
             depth_m: v.depth.map_or(f64::NAN, |d| d.0),
             speed_mps: v.speed.map_or(f64::NAN, |s| s.0),
         }));
+        // Each reference with the fit's residual there (eq. 1-2): which one was measured wrong or
+        // is fouled shows at a glance.
+        let (view, fit) = (self.depth_view(), self.fit.as_ref());
+        out.references.extend(self.refs.iter().map(|(px, depth)| {
+            let fitted = match view {
+                Some(v) if v.kind() == MapKind::Depth => v.point(px).map(Metres),
+                Some(v) => v.point(px).and_then(|r| fit?.depth(r)),
+                None => None,
+            };
+            (px, fitted.map_or(f64::NAN, |d| d.0 - depth.0))
+        }));
     }
 
     fn depth_grid(&self, size: (u32, u32), grid: (u32, u32), out: &mut Vec<f32>) -> bool {

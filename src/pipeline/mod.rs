@@ -139,6 +139,9 @@ pub struct FrameView {
     pub detections: Vec<(crate::geometry::PixelBox, f64)>,
     /// The fish tracked on this frame.
     pub tracks: Vec<TrackRecord>,
+    /// The reference objects in view: their pixel, and the last metric fit's residual there
+    /// (fitted minus known depth, m; NaN when there is no fit or no depth reading).
+    pub references: Vec<(crate::geometry::Pixel, f64)>,
 }
 
 impl FrameView {
@@ -147,6 +150,7 @@ impl FrameView {
         self.detected = false;
         self.detections.clear();
         self.tracks.clear();
+        self.references.clear();
     }
 }
 

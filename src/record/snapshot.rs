@@ -97,6 +97,19 @@ pub fn overlay(frame: &Frame, view: &FrameView, sample: Option<&ActivitySample>)
         let line = format!("{} {}", num(t.speed_mps, 2), num(t.depth_m, 1));
         draw_text(&mut img, t.bbox.x as i64, (t.bbox.y + t.bbox.h) as i64 + 3, &line, c);
     }
+    // Reference objects: a cross, and the fit's residual there in cm (yellow; red over 10 cm).
+    for &(px, residual) in &view.references {
+        let c = if residual.abs() > 0.1 { Rgb([255, 64, 64]) } else { Rgb([255, 220, 0]) };
+        let (x, y) = (px.u as i64, px.v as i64);
+        for d in -4..=4i64 {
+            for (xx, yy) in [(x + d, y), (x, y + d)] {
+                if xx >= 0 && yy >= 0 && xx < i64::from(w) && yy < i64::from(h) {
+                    img.put_pixel(xx as u32, yy as u32, c);
+                }
+            }
+        }
+        draw_text(&mut img, x + 6, y - 2, &num(residual * 100.0, 0), c);
+    }
     for y in 0..14.min(h) {
         for x in 0..w {
             img.put_pixel(x, y, Rgb([0, 0, 0]));
@@ -156,6 +169,28 @@ pub fn write(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn references_marked_with_their_residual() {
+        let mut jpg = Vec::new();
+        let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpg, 90);
+        image::DynamicImage::from(RgbImage::new(64, 48)).write_with_encoder(enc).expect("encode");
+        let frame = Frame {
+            seq: 0,
+            timestamp: crate::units::Seconds(0.0),
+            arrived: std::time::Instant::now(),
+            width: 64,
+            height: 48,
+            format: crate::pipeline::PixelFormat::Jpeg,
+            data: jpg,
+        };
+        let mut view = FrameView::default();
+        let p = |u, v| crate::geometry::Pixel { u, v };
+        view.references.extend([(p(20.0, 30.0), 0.02), (p(44.0, 30.0), -0.3)]);
+        let img = overlay(&frame, &view, None).expect("overlay");
+        assert_eq!(img.get_pixel(20, 30).0, [255, 220, 0], "a good reference is yellow");
+        assert_eq!(img.get_pixel(44, 26).0, [255, 64, 64], "a reference 30 cm off is red");
+    }
 
     #[test]
     fn digits_drawn_and_depth_coloured() {
