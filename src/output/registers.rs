@@ -58,6 +58,8 @@ pub mod status {
     pub const PLC_LINK_OK: u16 = 1 << 5;
     /// Bit 6: too few fish tracked for a reliable mean.
     pub const TOO_FEW_FISH: u16 = 1 << 6;
+    /// Bit 7: the metric scale in use comes from the fish, not the reference objects (`depth.scale`).
+    pub const SCALE_FROM_FISH: u16 = 1 << 7;
 }
 
 pub use crate::status::FaultCode;

@@ -86,6 +86,9 @@ impl Publisher {
         if h.last_sample.is_none_or(|s| s.flags.too_few_fish) {
             bits |= status::TOO_FEW_FISH;
         }
+        if h.calib.source == crate::pipeline::ScaleSource::Fish {
+            bits |= status::SCALE_FROM_FISH;
+        }
         let client = matches!(self.mode, ModbusMode::TcpClient | ModbusMode::RtuClient);
         let fault = if stopped {
             FaultCode::Stopped

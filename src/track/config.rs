@@ -140,13 +140,19 @@ impl TrackerConfig {
             return Err(TrackerConfigError::Key("det_thresh".into(), "score thresholds must not be NaN".into()));
         }
         if !(self.max_age_s >= 0.0 && self.max_age_s.is_finite()) {
-            return Err(TrackerConfigError::Key("max_age_s".into(), format!("{} is not a finite time >= 0", self.max_age_s)));
+            return Err(TrackerConfigError::Key(
+                "max_age_s".into(),
+                format!("{} is not a finite time >= 0", self.max_age_s),
+            ));
         }
         if !(self.depth_weight >= 0.0 && self.depth_weight.is_finite()) {
             return Err(TrackerConfigError::Key("depth_weight".into(), format!("{} is not >= 0", self.depth_weight)));
         }
         if !(self.buffer_rate >= 0.0 && self.buffer_max >= 0.0 && self.buffer_max.is_finite()) {
-            return Err(TrackerConfigError::Key("buffer_rate".into(), "buffer_rate and buffer_max must be >= 0".into()));
+            return Err(TrackerConfigError::Key(
+                "buffer_rate".into(),
+                "buffer_rate and buffer_max must be >= 0".into(),
+            ));
         }
         if self.max_tracks == 0 || self.max_tracks > super::MAX_TRACKS {
             return Err(TrackerConfigError::Key(
