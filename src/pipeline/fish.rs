@@ -258,6 +258,11 @@ impl FishPipeline {
                     if scale != DepthScale::Auto || ruler.is_none() || residual <= AUTO_MAX_RESIDUAL_M {
                         self.fish_fit.reset();
                         self.accept_reference_fit(f, refs.len());
+                        // `auto` keeps looking at the fish, so they are rulers at once when the
+                        // references go.
+                        if let (DepthScale::Auto, Some(length)) = (scale, ruler) {
+                            self.fish_refit(t_s, length, refs, false);
+                        }
                         return;
                     }
                 }
@@ -274,7 +279,7 @@ impl FishPipeline {
         if scale == DepthScale::References {
             return;
         }
-        self.fish_refit(t_s, length, refs);
+        self.fish_refit(t_s, length, refs, true);
     }
 
     /// Keeps a fit on the references.
@@ -303,8 +308,9 @@ impl FishPipeline {
 
     /// The fish fit (docs/pipeline.md, "The fish as the ruler"): each confirmed fish seen in enough
     /// depth frames is a reference at its depth scaled by `length` over its broadside length
-    /// ([`Rulers`]); `refs` (the visible references' pairs) are added.
-    fn fish_refit(&mut self, t_s: f64, length: crate::units::Metres, refs: References) {
+    /// ([`Rulers`]); `refs` (the visible references' pairs) are added. With `fit` false, only the
+    /// fish's looks are recorded.
+    fn fish_refit(&mut self, t_s: f64, length: crate::units::Metres, refs: References, fit: bool) {
         self.views.clear();
         self.views.extend(self.estimator.tracks());
         let view = match (&self.depth, &self.substitute) {
@@ -331,13 +337,16 @@ impl FishPipeline {
             };
             let angle = apparent_length(&intrinsics, &v.bbox, crate::units::Metres(1.0)).0;
             self.rulers.look(t_s, v.id, &intrinsics, centre, angle, relative);
-            if pairs.is_full() {
+            if !fit || pairs.is_full() {
                 continue;
             }
             if let Some(p) = self.rulers.pair(v.id, self.fit.as_ref(), length) {
                 let _ = pairs.push(p);
                 rulers += 1;
             }
+        }
+        if !fit {
+            return;
         }
         self.calib.references_visible = refs.len() as u32;
         match fit_rulers(&pairs, self.cfg.motion.body_length_cv) {
