@@ -59,7 +59,7 @@ fn main() {
     for fish in [20usize, 100] {
         let mut rng = Rng::new(7);
         let act = Activity::swarm(&mut rng);
-        let m = motion::swarm(fish, frames as usize, 30.0, &pond, &act, &mut rng);
+        let m = motion::swarm(fish, frames as usize, 30.0, &pond, &act, fme::synth::fish::Cohort::default(), &mut rng);
         let mut buf = FrameBuffers::new(640, 384);
         let t0 = Instant::now();
         for (f, st) in m.states.iter().enumerate() {

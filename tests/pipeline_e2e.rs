@@ -77,12 +77,32 @@ fn bundled_models_on_the_bundled_recording_give_calibrated_plausible_activity() 
 
 #[test]
 fn without_calibration_fish_are_counted_but_no_speed_is_claimed() {
-    let mut p = FishPipeline::new(&config(), None).expect("pipeline");
+    // With the references as the only ruler (`depth.scale = "references"`); the fish as the ruler is
+    // the next test.
+    let mut cfg = config();
+    cfg.depth.scale = fme::metric::DepthScale::References;
+    let mut p = FishPipeline::new(&cfg, None).expect("pipeline");
     let samples = run(&mut p, &frames()[..60]);
     let last = samples.last().expect("samples");
     assert!(last.flags.depth_uncalibrated && !p.calib().calibrated);
     assert!(last.mean.0.is_nan(), "no speed without metric depth: {last:?}");
     assert!(p.health().tracks >= 5, "fish still tracked: {:?}", p.health());
+}
+
+#[test]
+fn without_calibration_the_fish_are_the_ruler() {
+    // The shipped `depth.scale = "auto"` with no calibration file: the board default camera, and the
+    // fish of `motion.body_length_m` as the ruler once they have been seen in 10 depth frames (2 s).
+    let mut p = FishPipeline::new(&config(), None).expect("pipeline");
+    let samples = run(&mut p, &frames());
+    let c = p.calib();
+    assert!(c.calibrated && c.source == fme::pipeline::ScaleSource::Fish && c.fish_rulers >= 3, "{c:?}");
+    let last = samples.last().expect("samples");
+    assert!(!last.flags.depth_uncalibrated && last.mean.0.is_finite(), "{last:?}");
+    // Plausible, not scored (docs/accuracy.md has the scores): within a factor 2 of the truth.
+    let truth = true_mean(100, 120);
+    assert!(last.mean.0 > 0.5 * truth && last.mean.0 < 2.0 * truth, "{} vs {truth}", last.mean.0);
+    assert!(last.mean_body_lengths.is_finite() && last.mean_body_lengths > 0.0, "{last:?}");
 }
 
 #[test]

@@ -23,6 +23,7 @@ fn cfg(preset: Preset, fish: usize, frames: u32, w: u32, h: u32) -> SynthConfig 
         water: WaterType::C3,
         layout: Layout::F,
         k1: 0.0,
+        cohort: fme::synth::fish::Cohort::default(),
     }
 }
 
@@ -154,7 +155,7 @@ fn check_fish_pixels(k1: f64) {
     let r = Renderer::new(camera, w, h, pond, WaterType::C3, &cubes, 5);
     let mut rng = Rng::new(5);
     let act = Activity::swarm(&mut rng);
-    let m = motion::swarm(30, 3, 30.0, &pond, &act, &mut rng);
+    let m = motion::swarm(30, 3, 30.0, &pond, &act, fme::synth::fish::Cohort::default(), &mut rng);
     let mut buf = FrameBuffers::new(w, h);
     let px = r.render(3, 2.0 / 30.0, &m.bodies, &m.states[2], &mut buf);
     let depth = buf.depth_map(w, h);

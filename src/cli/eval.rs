@@ -92,6 +92,14 @@ pub struct EvalArgs {
     /// relative-gt: foul this many reference objects (their relative depth reads 50% nearer).
     #[arg(long, default_value_t = 0)]
     pub foul_refs: usize,
+    /// Run without the sequence's calibration (no intrinsics, no references): the box's board default
+    /// camera and `depth.scale = "fish"` (docs/pipeline.md, "The fish as the ruler").
+    #[arg(long)]
+    pub no_calibration: bool,
+    /// Hide reference objects from a time on: `N@T` hides the first N from T seconds (as if fouled
+    /// over or out of sight; the depth fit no longer sees them).
+    #[arg(long, value_name = "N@T")]
+    pub hide_refs: Option<String>,
     /// relative-gt: per-pixel multiplicative noise on the inverse depth (standard deviation).
     #[arg(long, default_value_t = 0.01)]
     pub rel_noise: f64,
@@ -237,6 +245,13 @@ fn rate(hz: f64) -> String {
     if hz > 0.0 { format!("{hz}") } else { "every frame".into() }
 }
 
+/// Parses `N@T` of `--hide-refs`.
+fn parse_hide_refs(text: &str) -> Option<(usize, f64)> {
+    let (n, t) = text.split_once('@')?;
+    let (n, t) = (n.trim().parse().ok()?, t.trim().parse::<f64>().ok()?);
+    (t.is_finite() && t >= 0.0).then_some((n, t))
+}
+
 /// Runs `fme eval`.
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if !(args.rel_noise.is_finite() && args.rel_noise >= 0.0 && args.rel_distortion.is_finite()) {
@@ -250,6 +265,13 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         depth: args.depth,
         foul_refs: args.foul_refs,
         track_rows: args.tracks.is_some(),
+        no_calibration: args.no_calibration,
+        hide_refs: match &args.hide_refs {
+            None => None,
+            Some(text) => Some(parse_hide_refs(text).ok_or_else(|| {
+                super::UsageError(format!("--hide-refs {text:?}: expected N@T (e.g. 8@5: eight references from 5 s)"))
+            })?),
+        },
         ..Default::default()
     };
     opts.relative.pixel_noise = args.rel_noise;

@@ -35,12 +35,18 @@ pub struct SynthArgs {
     /// Jerlov water type.
     #[arg(long, value_enum, ignore_case = true, default_value = "3C")]
     pub water: WaterType,
-    /// Reference-cube layout (paper Fig. 7).
+    /// Reference-cube layout (paper Fig. 7), or `none` for no reference objects.
     #[arg(long, value_enum, ignore_case = true, default_value = "F")]
     pub layout: Layout,
     /// Radial lens distortion k1 (OpenCV convention, negative = barrel; 0 = pinhole).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub k1: f64,
+    /// Mean fish length of the cohort, m.
+    #[arg(long, default_value_t = crate::synth::motion::MEAN_LENGTH_M)]
+    pub fish_length: f64,
+    /// Spread of the cohort's lengths: standard deviation over the mean.
+    #[arg(long, default_value_t = 0.12)]
+    pub fish_length_cv: f64,
     /// Replace an earlier fme output folder.
     #[arg(long)]
     pub force: bool,
@@ -59,6 +65,7 @@ pub fn run(args: SynthArgs) -> anyhow::Result<()> {
         water: args.water,
         layout: args.layout,
         k1: args.k1,
+        cohort: crate::synth::fish::Cohort { mean_length_m: args.fish_length, length_cv: args.fish_length_cv },
     };
     cfg.validate().map_err(|e| UsageError(e.to_string()))?;
     let total = u64::from(cfg.frames) * if cfg.preset == Preset::PostprocSuite { 18 } else { 1 };

@@ -178,6 +178,9 @@ impl Config {
         })?;
         self.postprocess.validate().map_err(keyed)?;
         self.motion.validate().map_err(keyed)?;
+        if self.depth.scale == crate::metric::DepthScale::Fish && self.motion.body_length().is_none() {
+            return err("depth.scale", "\"fish\" needs the cohort's mean length: motion.body_length_m > 0");
+        }
         positive("output.rate_hz", self.output.rate_hz)?;
         if self.output.rate_hz > 100.0 {
             return err("output.rate_hz", "must be <= 100 Hz");

@@ -104,6 +104,7 @@ fn status_words(bits: u16) -> String {
         (status::PLC_LINK_OK, "plc-link-ok"),
         (status::TOO_FEW_FISH, "too-few-fish"),
         (status::RECORD_FAULT, "record-fault"),
+        (status::SCALE_FROM_FISH, "scale-from-fish"),
     ];
     let v: Vec<&str> = names.iter().filter(|(b, _)| bits & b != 0).map(|(_, n)| *n).collect();
     if v.is_empty() { "-".into() } else { v.join(" ") }
@@ -297,9 +298,16 @@ last {}",
                 if c.calibrated {
                     let _ = write!(
                         body,
-                        "scale {:.6}\nshift {:.6}\nresidual {:.3} m\nreferences-visible {}",
-                        c.scale, c.shift, c.residual_m, c.references_visible
+                        "scale {:.6}\nshift {:.6}\nresidual {:.3} m\nreferences-visible {}\nscale-from {}",
+                        c.scale,
+                        c.shift,
+                        c.residual_m,
+                        c.references_visible,
+                        c.source.name()
                     );
+                    if c.source == crate::pipeline::ScaleSource::Fish {
+                        let _ = write!(body, " ({} fish)", c.fish_rulers);
+                    }
                 } else {
                     let _ = write!(body, "not calibrated (references-visible {})", c.references_visible);
                 }

@@ -51,6 +51,11 @@ pub struct EvalOptions {
     pub det_seed: u64,
     /// Collect one [`TrackRow`] per fish and frame into [`EvalReport::tracks`] (`--tracks`).
     pub track_rows: bool,
+    /// Run without the sequence's calibration (`--no-calibration`): the board default camera, the fish
+    /// as the ruler.
+    pub no_calibration: bool,
+    /// Hide the first N reference objects from T seconds on (`--hide-refs N@T`).
+    pub hide_refs: Option<(usize, f64)>,
 }
 
 impl Default for EvalOptions {
@@ -62,6 +67,8 @@ impl Default for EvalOptions {
             foul_refs: 0,
             det_seed: 1,
             track_rows: false,
+            no_calibration: false,
+            hide_refs: None,
         }
     }
 }
@@ -139,6 +146,18 @@ pub struct EvalReport {
     pub speed_rmse_now_mps: f64,
     /// Distance correlation of estimated and true swarm speed.
     pub speed_distcorr: f64,
+    /// RMSE of the published body lengths/s against the truth (each fish's speed over its own length,
+    /// `gt/world.csv`), at the time the estimate refers to; `None` without lengths in the truth.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bls_rmse: Option<f64>,
+    /// Distance correlation of estimated and true body lengths/s.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bls_distcorr: Option<f64>,
+    /// Mean error of body lengths/s (estimated - true).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bls_bias: Option<f64>,
+    /// What set the metric scale at the end (`depth.scale`): "references", "fish" or "none".
+    pub scale_source: &'static str,
     /// 2.5% and 97.5% quantiles of the per-frame error (estimated - true), m/s.
     pub error_ci95_mps: [f64; 2],
     /// Mean error (estimated - true), m/s.
@@ -275,7 +294,15 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
     cfg.source.path = seq.dir.clone();
     cfg.source.realtime = false;
     cfg.source.looping = false;
-    let calibration = Calibration::for_config(&cfg).map_err(EvalError::Model)?;
+    let calibration = if opts.no_calibration {
+        cfg.camera.calibration = std::path::PathBuf::new();
+        if cfg.motion.body_length().is_some() {
+            cfg.depth.scale = crate::metric::DepthScale::Fish;
+        }
+        None
+    } else {
+        Calibration::for_config(&cfg).map_err(EvalError::Model)?
+    };
     let boxes_name = match &opts.boxes {
         BoxesChoice::Gt => "gt".to_string(),
         BoxesChoice::Tracker => "tracker".to_string(),
@@ -303,8 +330,10 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
     let mut source = RecordedSource::open(&seq.dir, false, false)
         .map_err(|e| EvalError::Input { path: seq.dir.clone(), msg: e.to_string() })?;
 
-    // True swarm speed per frame: mean |v| of the fish visible in it.
+    // True swarm speed per frame: mean |v| of the fish visible in it; and mean |v| / length, where
+    // world.csv has the fish's lengths.
     let mut true_sum = vec![(0.0f64, 0usize); seq.len() as usize + 1];
+    let mut true_bls = vec![(0.0f64, 0usize); seq.len() as usize + 1];
     for r in &seq.world {
         if r.visibility > 0.0
             && r.velocity.iter().all(|v| v.is_finite())
@@ -312,8 +341,16 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         {
             s.0 += r.velocity.norm();
             s.1 += 1;
+            if r.length.0.is_finite()
+                && r.length.0 > 0.0
+                && let Some(b) = true_bls.get_mut(r.frame as usize)
+            {
+                b.0 += r.velocity.norm() / r.length.0;
+                b.1 += 1;
+            }
         }
     }
+    let mut hide = opts.hide_refs;
     // Camera z of each fish's body centre by (frame, id): ground-truth boxes carry world.csv's ids.
     let body_z: HashMap<(u32, u32), f64> = if estimated && opts.boxes == BoxesChoice::Gt {
         seq.world.iter().map(|r| ((r.frame, r.id), seq.camera.pose.to_camera(&r.position).depth().0)).collect()
@@ -340,6 +377,12 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
             Err(e) => return Err(EvalError::Input { path: seq.dir.clone(), msg: e.to_string() }),
         };
         let frame = u32::try_from(frame_data.seq + 1).unwrap_or(u32::MAX);
+        if let Some((n, t_hide)) = hide
+            && frame_data.timestamp.0 >= t_hide
+        {
+            pipeline.hide_references(n);
+            hide = None;
+        }
         let cpu0 = process_cpu_s();
         let sample = pipeline
             .process(&frame_data)
@@ -421,8 +464,9 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
     }
     // Truth at the time each estimate refers to (`SwarmEstimate::latency`), interpolated between frames.
     let truth_frame: Vec<Option<f64>> = true_sum.iter().map(|&(ts, tn)| (tn > 0).then(|| ts / tn as f64)).collect();
+    let bls_frame: Vec<Option<f64>> = true_bls.iter().map(|&(ts, tn)| (tn > 0).then(|| ts / tn as f64)).collect();
     let fps = seq.meta.fps;
-    let truth_at = |tq: f64| -> Option<f64> {
+    let interpolate = |truth_frame: &[Option<f64>], tq: f64| -> Option<f64> {
         let pos = tq * fps + 1.0;
         let f0 = pos.floor();
         if f0.is_nan() || f0 < 1.0 {
@@ -438,11 +482,21 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
             _ => None,
         }
     };
+    let truth_at = |tq: f64| interpolate(&truth_frame, tq);
     for r in &mut series {
         let now = truth_frame.get(r.row.frame as usize).copied().flatten();
         r.true_now_mps = now;
         r.true_mps = if r.est_mps().is_some() { truth_at(r.t() - r.row.sample.latency.0) } else { now };
     }
+    // Body lengths per second: the published value against the truth at the time it refers to.
+    let (bls_e, bls_t): (Vec<f64>, Vec<f64>) = series
+        .iter()
+        .filter_map(|r| {
+            let e = r.row.sample.mean_body_lengths;
+            let t = interpolate(&bls_frame, r.t() - r.row.sample.latency.0)?;
+            e.is_finite().then_some((e, t))
+        })
+        .unzip();
     let scored: Vec<&ScoredRow> = series.iter().filter(|r| r.true_mps.is_some() && r.est_mps().is_some()).collect();
     if speed_truth && scored.len() < 2 {
         return Err(EvalError::NothingToScore(format!(
@@ -475,6 +529,10 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         speed_rmse_mps: rmse(&est_v, &truth).unwrap_or(f64::NAN),
         speed_rmse_now_mps: rmse(&now_e, &now_t).unwrap_or(f64::NAN),
         speed_distcorr: distance_correlation(&est_v, &truth).unwrap_or(0.0),
+        bls_rmse: rmse(&bls_e, &bls_t),
+        bls_distcorr: distance_correlation(&bls_e, &bls_t),
+        bls_bias: bias(&bls_e, &bls_t),
+        scale_source: pipeline.calib().source.name(),
         error_ci95_mps: [quantile(&errors, 0.025).unwrap_or(0.0), quantile(&errors, 0.975).unwrap_or(0.0)],
         speed_bias_mps: bias(&est_v, &truth).unwrap_or(0.0),
         mean_true_mps: truth.iter().sum::<f64>() / n,

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use super::InferError;
 use super::frame::Normalize;
 use super::runtime::SessionOptions;
-use crate::metric::{DepthSample, FitMethod};
+use crate::metric::{DepthSample, DepthScale, FitMethod};
 
 /// Most detections kept per frame (the tracker's fixed capacity).
 pub const MAX_DETECTIONS: usize = 256;
@@ -118,6 +118,9 @@ pub struct DepthConfig {
     pub flip: bool,
     /// Metric fit of relative inverse depth on the reference objects (paper eq. 2 and Table 4).
     pub fit: FitMethod,
+    /// What sets the metric scale: the reference objects, the fish (of length
+    /// `motion.body_length_m`), or the references while they fit well and else the fish.
+    pub scale: DepthScale,
     /// How a fish's depth is read from the map (see [`DepthSample`]).
     pub sample: DepthSample,
     /// Channel means (R, G, B) in 0..1 units, subtracted after `/255`. ImageNet by default; use
@@ -143,6 +146,7 @@ impl Default for DepthConfig {
             spin: false,
             flip: false,
             fit: FitMethod::Robust,
+            scale: DepthScale::Auto,
             sample: DepthSample::Visible,
             mean: [0.485, 0.456, 0.406],
             std: [0.229, 0.224, 0.225],

@@ -23,6 +23,20 @@ pub enum FitMethod {
     Knn,
 }
 
+/// What sets the metric scale of the depth map (`depth.scale`; docs/pipeline.md, "The fish as the
+/// ruler").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum DepthScale {
+    /// The reference objects only (paper eq. 1-2).
+    References,
+    /// The tracked fish of known mean length (`motion.body_length_m`), plus any visible references.
+    Fish,
+    /// The references while enough are visible and fit well, else the fish.
+    #[default]
+    Auto,
+}
+
 /// A fitted mapping from relative inverse depth to metres.
 #[derive(Debug, Clone)]
 pub enum DepthFit {

@@ -14,14 +14,19 @@
 //!
 //! Nothing here allocates: references are held in a fixed-capacity list of [`MAX_REFERENCES`].
 
+mod fish;
 mod fit;
 mod method;
 mod references;
 pub mod regressors;
 mod sample;
 
+pub use fish::{
+    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, FISH_FIT_SMOOTHING_S, FitSmoother, LOOKS, MIN_LOOKS, MIN_RULERS,
+    RULER_TIMEOUT_S, Rulers, fit_rulers, ruler_depth,
+};
 pub use fit::{DepthModel, FitError, ROBUST_INLIER, ReferencePair, References, ScaleShift, fit, fit_robust};
-pub use method::{DepthFit, FitMethod};
+pub use method::{DepthFit, DepthScale, FitMethod};
 pub use references::{ReferenceFootprints, ReferencePoints};
 pub use sample::{
     CORE_FRAC, DepthSample, MAX_OVERLAPS, MAX_RADIUS, MIN_VISIBLE_POINTS, MIN_VISIBLE_POINTS_BEHIND, MapKind, Overlaps,

@@ -38,6 +38,12 @@ impl ReferencePoints {
         self.points.is_empty()
     }
 
+    /// Leaves out the first `n` references from now on (hidden or fouled beyond use).
+    pub fn drop_first(&mut self, n: usize) {
+        let keep: heapless::Vec<(Pixel, Metres), MAX_REFERENCES> = self.points.iter().skip(n).copied().collect();
+        self.points = keep;
+    }
+
     /// Pixel and true depth of each visible reference.
     pub fn iter(&self) -> impl Iterator<Item = (Pixel, Metres)> + '_ {
         self.points.iter().copied()

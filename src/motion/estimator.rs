@@ -98,6 +98,9 @@ pub struct MotionConfig {
     /// Mean fish body length for body lengths/s, m; 0 = estimated per fish
     /// ([`super::heading::fish_length`]).
     pub body_length_m: Metres,
+    /// Spread of the cohort's lengths: standard deviation over the mean (a graded cohort about 0.1).
+    /// The fish fit (`depth.scale`) accepts a fish as a ruler within twice this of the others.
+    pub body_length_cv: f64,
     /// Fewer fish in the mean than this raises the "too few fish" status bit.
     pub min_fish: u32,
     /// Time constant of the exponential smoothing of the activity index, s.
@@ -128,6 +131,7 @@ impl Default for MotionConfig {
     fn default() -> Self {
         Self {
             body_length_m: Metres(0.35),
+            body_length_cv: 0.1,
             min_fish: 3,
             smoothing_s: Seconds(60.0),
             // 1 s chords instead of the paper's frame-to-frame speed (docs/accuracy.md, ablations);
@@ -154,6 +158,9 @@ impl MotionConfig {
     pub fn validate(&self) -> Result<(), &'static str> {
         if !(self.body_length_m.0.is_finite() && self.body_length_m.0 >= 0.0) {
             return Err("motion.body_length_m must be >= 0 m (0 = estimated per fish)");
+        }
+        if !(self.body_length_cv.is_finite() && (0.0..=0.5).contains(&self.body_length_cv)) {
+            return Err("motion.body_length_cv must be within 0..=0.5");
         }
         if !(self.speed_span_s.0.is_finite() && self.speed_span_s.0 >= 0.0) {
             return Err("motion.speed_span_s must be zero or a positive number of seconds");

@@ -61,6 +61,8 @@ pub mod status {
     /// Bit 7: recording paused after a disk write error (disk full, read-only; docs/recording.md).
     /// The activity values are unaffected.
     pub const RECORD_FAULT: u16 = 1 << 7;
+    /// Bit 8: the metric scale in use comes from the fish, not the reference objects (`depth.scale`).
+    pub const SCALE_FROM_FISH: u16 = 1 << 8;
 }
 
 pub use crate::status::FaultCode;

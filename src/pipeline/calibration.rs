@@ -32,8 +32,9 @@ pub struct Calibration {
 impl Calibration {
     /// The calibration a configuration asks for: `camera.calibration` when set, else a recorded
     /// source's own `meta.json`, else none (a camera without calibration runs uncalibrated).
-    /// A calibration that cannot give a metric fit (fewer than two reference objects) is an error:
-    /// the box would track fish forever and never report a speed.
+    /// A calibration that cannot give a metric fit (fewer than two reference objects, and no fish
+    /// ruler: `depth.scale = "references"` or `motion.body_length_m = 0`) is an error: the box would
+    /// track fish forever and never report a speed.
     pub fn for_config(cfg: &Config) -> Result<Option<Self>, String> {
         let configured = &cfg.camera.calibration;
         let (path, key) = if !configured.as_os_str().is_empty() {
@@ -46,9 +47,10 @@ impl Calibration {
             (meta, "the recording's calibration")
         };
         let c = Self::load(&path).map_err(|e| format!("{key}: {e}"))?;
-        if c.references.len() < 2 {
+        let fish_ruler = cfg.depth.scale != crate::metric::DepthScale::References && cfg.motion.body_length().is_some();
+        if c.references.len() < 2 && !fish_ruler {
             return Err(format!(
-                "{key}: {}: reference_objects: {} reference object(s); the metric depth fit needs at least 2",
+                "{key}: {}: reference_objects: {} reference object(s); the metric depth fit needs at least 2 (or depth.scale = \"fish\" or \"auto\" with motion.body_length_m > 0)",
                 path.display(),
                 c.references.len()
             ));

@@ -16,13 +16,17 @@
 use super::rate::RateMeter;
 use super::substitute::{DepthView, Substitute};
 use super::{
-    ActivitySample, CalibInfo, Calibration, Frame, FrameView, Pipeline, PipelineError, QualityFlags, StageHealth,
-    TrackRecord,
+    ActivitySample, CalibInfo, Calibration, Frame, FrameView, Pipeline, PipelineError, QualityFlags, ScaleSource,
+    StageHealth, TrackRecord,
 };
 use crate::config::Config;
 use crate::geometry::{Camera, PixelBox};
 use crate::infer::{self, DepthNet, Detector, FramePlan, InferSchedule, RgbFrame};
-use crate::metric::{DepthFit, MapKind, ROBUST_INLIER, ReferenceFootprints, ReferencePoints, sample_fish};
+use crate::metric::{
+    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, DepthFit, DepthScale, FitSmoother, MapKind, ROBUST_INLIER,
+    ReferenceFootprints, ReferencePoints, References, Rulers, fit_rulers, sample_fish,
+};
+use crate::motion::heading::apparent_length;
 use crate::motion::{ActivityEstimator, SwarmEstimate, TrackObservation, TrackView};
 use crate::track::{self, Tracker};
 use crate::units::{Metres, MetresPerSecond};
@@ -55,6 +59,12 @@ pub struct FishPipeline {
     footprints: ReferenceFootprints,
     fit: Option<DepthFit>,
     fit_stats: FitStats,
+    /// The fish fit's running scale and shift (`depth.scale`).
+    fish_fit: FitSmoother,
+    /// The fish's looks for the fish fit.
+    rulers: Rulers,
+    /// The estimator's tracks, copied for the fish fit (allocated once).
+    views: Vec<TrackView>,
     calib: CalibInfo,
     rgb: Vec<u8>,
     dets: Vec<track::Detection>,
@@ -147,6 +157,9 @@ impl FishPipeline {
             footprints,
             fit: None,
             fit_stats: FitStats::default(),
+            fish_fit: FitSmoother::default(),
+            rulers: Rulers::new(crate::motion::MAX_FISH),
+            views: Vec::with_capacity(crate::motion::MAX_FISH),
             rgb: Vec::with_capacity(cfg.source.width as usize * cfg.source.height as usize * 3),
             dets: Vec::with_capacity(track::MAX_DETS),
             given: Vec::with_capacity(track::MAX_TRACKS),
@@ -196,6 +209,12 @@ impl FishPipeline {
         self.refs.len()
     }
 
+    /// Takes the first `n` reference objects out of the fit from now on, as if fouled over or out of
+    /// sight (`fme eval --hide-refs`; the tests of `depth.scale = "auto"`).
+    pub fn hide_references(&mut self, n: usize) {
+        self.refs.drop_first(n);
+    }
+
     /// The depth map the pipeline samples now: the network's last map, or the substitute's.
     fn depth_view(&self) -> Option<&dyn DepthView> {
         match (&self.depth, &self.substitute) {
@@ -211,41 +230,147 @@ impl FishPipeline {
         self.tracker = Tracker::new(self.cfg.tracker);
         self.estimator = ActivityEstimator::new(*self.estimator.camera(), self.cfg.motion, self.cfg.postprocess);
         self.schedule = InferSchedule::new(self.cfg.detector.rate_hz, self.cfg.depth.rate_hz);
+        self.rulers.clear();
     }
 
-    /// Refits on the current depth map (eq. 1-2); a failed fit keeps the previous one. Metric maps
-    /// (ground-truth depth) need no fit.
-    fn refit(&mut self) {
+    /// Refits on the current depth map (eq. 1-2) as `depth.scale` says: on the references, or on the
+    /// fish as rulers (with the visible references' pairs added), or the references while at least
+    /// [`AUTO_MIN_REFERENCES`] are visible and fit within [`AUTO_MAX_RESIDUAL_M`], else the fish. A
+    /// failed fit keeps the previous one. Metric maps (ground-truth depth) need no fit.
+    fn refit(&mut self, t_s: f64) {
         let Some(view) = self.depth_view() else { return };
-        if view.kind() == MapKind::Depth || self.refs.is_empty() {
+        if view.kind() == MapKind::Depth {
             return;
         }
-        let refs = self.refs.pairs(|px| view.point(px));
-        self.calib.references_visible = refs.len() as u32;
-        match self.cfg.depth.fit.fit(&refs, ROBUST_INLIER) {
-            Ok(f) => {
-                self.fit_stats.fits += 1;
-                let (scale, shift, residual) = match f.scale_shift() {
-                    Some(ss) => {
-                        self.fit_stats.residual_sum_m += ss.residual_rms.0;
-                        self.fit_stats.residuals += 1;
-                        self.fit_stats.rejected += u64::from(ss.rejected.count_ones());
-                        (ss.s, ss.t, ss.residual_rms.0)
+        let scale = self.cfg.depth.scale;
+        let ruler = self.cfg.motion.body_length();
+        let refs = if self.refs.is_empty() { References::new() } else { self.refs.pairs(|px| view.point(px)) };
+        let by_refs = match scale {
+            DepthScale::References => !self.refs.is_empty(),
+            DepthScale::Auto => refs.len() >= AUTO_MIN_REFERENCES || ruler.is_none(),
+            DepthScale::Fish => false,
+        };
+        if by_refs && !self.refs.is_empty() {
+            self.calib.references_visible = refs.len() as u32;
+            match self.cfg.depth.fit.fit(&refs, ROBUST_INLIER) {
+                Ok(f) => {
+                    let residual = f.scale_shift().map_or(f64::NAN, |ss| ss.residual_rms.0);
+                    // `auto` leaves references that fit badly (fouled, moved) to the fish.
+                    if scale != DepthScale::Auto || ruler.is_none() || residual <= AUTO_MAX_RESIDUAL_M {
+                        self.fish_fit.reset();
+                        self.accept_reference_fit(f, refs.len());
+                        // `auto` keeps looking at the fish, so they are rulers at once when the
+                        // references go.
+                        if let (DepthScale::Auto, Some(length)) = (scale, ruler) {
+                            self.fish_refit(t_s, length, refs, false);
+                        }
+                        return;
                     }
-                    None => (f64::NAN, f64::NAN, f64::NAN),
-                };
-                self.fit = Some(f);
+                }
+                Err(e) => {
+                    if scale != DepthScale::Auto || ruler.is_none() {
+                        self.fit_stats.failures += 1;
+                        tracing::debug!("metric fit failed ({e}); keeping the previous fit");
+                        return;
+                    }
+                }
+            }
+        }
+        let Some(length) = ruler else { return };
+        if scale == DepthScale::References {
+            return;
+        }
+        self.fish_refit(t_s, length, refs, true);
+    }
+
+    /// Keeps a fit on the references.
+    fn accept_reference_fit(&mut self, f: DepthFit, visible: usize) {
+        self.fit_stats.fits += 1;
+        let (scale, shift, residual) = match f.scale_shift() {
+            Some(ss) => {
+                self.fit_stats.residual_sum_m += ss.residual_rms.0;
+                self.fit_stats.residuals += 1;
+                self.fit_stats.rejected += u64::from(ss.rejected.count_ones());
+                (ss.s, ss.t, ss.residual_rms.0)
+            }
+            None => (f64::NAN, f64::NAN, f64::NAN),
+        };
+        self.fit = Some(f);
+        self.calib = CalibInfo {
+            scale,
+            shift,
+            residual_m: residual,
+            references_visible: visible as u32,
+            calibrated: true,
+            source: ScaleSource::References,
+            fish_rulers: 0,
+        };
+    }
+
+    /// The fish fit (docs/pipeline.md, "The fish as the ruler"): each confirmed fish seen in enough
+    /// depth frames is a reference at its depth scaled by `length` over its broadside length
+    /// ([`Rulers`]); `refs` (the visible references' pairs) are added. With `fit` false, only the
+    /// fish's looks are recorded.
+    fn fish_refit(&mut self, t_s: f64, length: crate::units::Metres, refs: References, fit: bool) {
+        self.views.clear();
+        self.views.extend(self.estimator.tracks());
+        let view = match (&self.depth, &self.substitute) {
+            (Some(net), _) => net.last_map().map(|m| m as &dyn DepthView),
+            (None, Some(s)) => s.depth(),
+            (None, None) => None,
+        };
+        let Some(view) = view else { return };
+        let mut pairs = refs.clone();
+        let intrinsics = self.estimator.camera().intrinsics;
+        let (how, views) = (self.cfg.depth.sample, &self.views);
+        let mut rulers = 0u32;
+        for v in views {
+            // Seen in the last frame.
+            if !self.last_t.is_some_and(|t| t - v.last_seen.0 <= 0.25) {
+                continue;
+            }
+            let centre = v.bbox.center();
+            let others = views.iter().filter(|x| x.id != v.id).map(|x| &x.bbox);
+            let Some(relative) =
+                sample_fish(how, view.kind(), &v.bbox, others, || view.point(centre), |p| view.grid(p))
+            else {
+                continue;
+            };
+            let angle = apparent_length(&intrinsics, &v.bbox, crate::units::Metres(1.0)).0;
+            self.rulers.look(t_s, v.id, &intrinsics, centre, angle, relative);
+            if !fit || pairs.is_full() {
+                continue;
+            }
+            if let Some(p) = self.rulers.pair(v.id, self.fit.as_ref(), length) {
+                let _ = pairs.push(p);
+                rulers += 1;
+            }
+        }
+        if !fit {
+            return;
+        }
+        self.calib.references_visible = refs.len() as u32;
+        match fit_rulers(&pairs, self.cfg.motion.body_length_cv) {
+            Ok(f) => {
+                let f = self.fish_fit.update(t_s, f);
+                self.fit_stats.fits += 1;
+                self.fit_stats.residual_sum_m += f.residual_rms.0;
+                self.fit_stats.residuals += 1;
+                self.fit_stats.rejected += u64::from(f.rejected.count_ones());
+                self.fit = Some(DepthFit::ScaleShift(f));
                 self.calib = CalibInfo {
-                    scale,
-                    shift,
-                    residual_m: residual,
+                    scale: f.s,
+                    shift: f.t,
+                    residual_m: f.residual_rms.0,
                     references_visible: refs.len() as u32,
                     calibrated: true,
+                    source: ScaleSource::Fish,
+                    fish_rulers: rulers,
                 };
             }
             Err(e) => {
                 self.fit_stats.failures += 1;
-                tracing::debug!("metric fit failed ({e}); keeping the previous fit");
+                tracing::debug!("fish fit failed ({e}); keeping the previous fit");
             }
         }
     }
@@ -302,7 +427,7 @@ impl FishPipeline {
         }
         self.health.depth_ok = true;
         self.depth_rate.record(frame.timestamp.0);
-        self.refit();
+        self.refit(frame.timestamp.0);
         Ok(())
     }
 }

@@ -87,6 +87,33 @@ pub struct CalibInfo {
     pub references_visible: u32,
     /// Whether a fit is available.
     pub calibrated: bool,
+    /// What set the scale of the fit in use (`depth.scale`).
+    pub source: ScaleSource,
+    /// Fish used as rulers in the last fish fit.
+    pub fish_rulers: u32,
+}
+
+/// What set the metric scale of the fit in use (`depth.scale`; docs/pipeline.md).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum ScaleSource {
+    /// No fit yet.
+    #[default]
+    None,
+    /// The reference objects (paper eq. 1-2).
+    References,
+    /// The tracked fish of the configured mean length (with any visible references).
+    Fish,
+}
+
+impl ScaleSource {
+    /// Name shown on the console and in the series.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::References => "references",
+            Self::Fish => "fish",
+        }
+    }
 }
 
 /// A pipeline: owns all per-frame state; called on the pipeline thread only.

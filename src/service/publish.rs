@@ -98,6 +98,9 @@ impl Publisher {
         if h.record.disk_fault {
             bits |= status::RECORD_FAULT;
         }
+        if h.calib.source == crate::pipeline::ScaleSource::Fish {
+            bits |= status::SCALE_FROM_FISH;
+        }
         let client = matches!(self.mode, ModbusMode::TcpClient | ModbusMode::RtuClient);
         let fault = if stopped {
             FaultCode::Stopped

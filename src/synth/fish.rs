@@ -31,10 +31,29 @@ pub struct FishBody {
     pub pattern: u64,
 }
 
+/// The lengths of a cohort of fish (`fme synth --fish-length --fish-length-cv`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cohort {
+    /// Mean snout-to-tail-tip length, m.
+    pub mean_length_m: f64,
+    /// Standard deviation of the lengths over the mean.
+    pub length_cv: f64,
+}
+
+impl Default for Cohort {
+    /// Salmon of 0.35 m, sd 12 %.
+    fn default() -> Self {
+        Self { mean_length_m: super::motion::MEAN_LENGTH_M, length_cv: 0.12 }
+    }
+}
+
 impl FishBody {
-    /// A salmon-like fish with length drawn around `mean_length` (sd 12 %), colours varied slightly.
-    pub fn random(rng: &mut Rng, mean_length: f64) -> Self {
-        let length = (mean_length * (1.0 + 0.12 * rng.normal())).clamp(mean_length * 0.6, mean_length * 1.5);
+    /// A salmon-like fish with length drawn from `cohort` (normal, clamped to 0.6-1.5 times the
+    /// mean), colours varied slightly.
+    pub fn random(rng: &mut Rng, cohort: Cohort) -> Self {
+        let mean_length = cohort.mean_length_m;
+        let length =
+            (mean_length * (1.0 + cohort.length_cv * rng.normal())).clamp(mean_length * 0.6, mean_length * 1.5);
         let k = rng.range(0.85, 1.15);
         let tint = rng.range(-0.04, 0.04);
         Self {

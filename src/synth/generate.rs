@@ -1,5 +1,6 @@
 //! Runs a motion preset through the renderer and writes MOTChallenge sequences.
 
+use super::fish::Cohort;
 use super::motion::{self, Activity, Motion};
 use super::render::{FrameBuffers, Renderer};
 use super::scene::{self, Layout, Pond};
@@ -65,6 +66,8 @@ pub struct SynthConfig {
     pub layout: Layout,
     /// Radial lens distortion `k1` (OpenCV; negative = barrel), 0 for a pinhole.
     pub k1: f64,
+    /// The fish's length distribution.
+    pub cohort: Cohort,
 }
 
 impl Default for SynthConfig {
@@ -80,6 +83,7 @@ impl Default for SynthConfig {
             water: WaterType::C3,
             layout: Layout::F,
             k1: 0.0,
+            cohort: Cohort::default(),
         }
     }
 }
@@ -103,6 +107,13 @@ impl SynthConfig {
             if !(16..=8192).contains(&v) {
                 return Err(Error::Config(format!("{name} {v} must be within 16..=8192 pixels")));
             }
+        }
+        let c = self.cohort;
+        if !(c.mean_length_m.is_finite() && (0.05..=3.0).contains(&c.mean_length_m)) {
+            return Err(Error::Config(format!("--fish-length {} must be within [0.05, 3] m", c.mean_length_m)));
+        }
+        if !(c.length_cv.is_finite() && (0.0..=0.3).contains(&c.length_cv)) {
+            return Err(Error::Config(format!("--fish-length-cv {} must be within [0, 0.3]", c.length_cv)));
         }
         if !self.k1.is_finite() || self.k1.abs() > 0.3 {
             return Err(Error::Config(format!("--k1 {} must be within [-0.3, 0.3]", self.k1)));
@@ -159,12 +170,12 @@ pub fn generate(cfg: &SynthConfig, out: &Path, force: bool, progress: &(dyn Fn(u
             } else {
                 Activity::swarm(&mut rng)
             };
-            let m = motion::swarm(cfg.fish, frames, cfg.fps, &pond, &activity, &mut rng);
+            let m = motion::swarm(cfg.fish, frames, cfg.fps, &pond, &activity, cfg.cohort, &mut rng);
             base.write(stage.path(), &name, cfg.preset.name(), &m, progress)?;
             sequences.push(out.to_path_buf());
         }
         Preset::Single => {
-            let m = motion::single(frames, cfg.fps, &pond, &mut rng);
+            let m = motion::single(frames, cfg.fps, &pond, cfg.cohort, &mut rng);
             base.write(stage.path(), &name, cfg.preset.name(), &m, progress)?;
             sequences.push(out.to_path_buf());
         }
@@ -174,7 +185,7 @@ pub fn generate(cfg: &SynthConfig, out: &Path, force: bool, progress: &(dyn Fn(u
             let mut list = String::new();
             for (k, s) in scenes.iter().enumerate() {
                 let mut srng = Rng::derive(cfg.seed, k as u64 + 1);
-                let m = motion::suite(s, frames, cfg.fps, &pond, &eye, &mut srng);
+                let m = motion::suite(s, frames, cfg.fps, &pond, &eye, cfg.cohort, &mut srng);
                 let dir = stage.path().join(&s.name);
                 base.write(&dir, &s.name, &format!("postproc-suite/{}", s.name), &m, progress)?;
                 list.push_str(&s.name);

@@ -8,7 +8,7 @@
 //! - `single`: one fish on a random smooth path (sum of sinusoids), velocity its exact derivative.
 //! - `postproc-suite`: the paper's 18 single-fish scenes (sec. 4.4), exact constant-acceleration paths.
 
-use super::fish::{FishBody, FishState, tail_beat_hz};
+use super::fish::{Cohort, FishBody, FishState, tail_beat_hz};
 use super::scene::Pond;
 use crate::rng::Rng;
 use nalgebra::Vector3;
@@ -87,8 +87,16 @@ struct Agent {
 }
 
 /// The `swarm` and `feeding` presets.
-pub fn swarm(n: usize, frames: usize, fps: f64, pond: &Pond, activity: &Activity, rng: &mut Rng) -> Motion {
-    let bodies: Vec<FishBody> = (0..n).map(|_| FishBody::random(rng, MEAN_LENGTH_M)).collect();
+pub fn swarm(
+    n: usize,
+    frames: usize,
+    fps: f64,
+    pond: &Pond,
+    activity: &Activity,
+    cohort: Cohort,
+    rng: &mut Rng,
+) -> Motion {
+    let bodies: Vec<FishBody> = (0..n).map(|_| FishBody::random(rng, cohort)).collect();
     let centre = pond.mill_center();
     let duration = frames as f64 / fps;
     let ring_max = (centre.x.min(pond.size.x - centre.x).min(centre.y).min(pond.size.y - centre.y) - 0.45).max(0.5);
@@ -244,8 +252,8 @@ fn headed(p: Vector3<f64>, v: Vector3<f64>, prev: Option<&FishState>) -> FishSta
 }
 
 /// The `single` preset: one fish on a smooth random 3D path (two sinusoids per axis).
-pub fn single(frames: usize, fps: f64, pond: &Pond, rng: &mut Rng) -> Motion {
-    let body = FishBody::random(rng, MEAN_LENGTH_M);
+pub fn single(frames: usize, fps: f64, pond: &Pond, cohort: Cohort, rng: &mut Rng) -> Motion {
+    let body = FishBody::random(rng, cohort);
     let c = pond.mill_center();
     let s = pond.size;
     // Amplitudes per axis (two terms) within the pond, away from the camera wall.
@@ -345,8 +353,16 @@ fn paper_to_world(d: [f64; 3]) -> Vector3<f64> {
 }
 
 /// One post-processing scene: fish 1 on the scene's path; with occlusion, fish 2 crosses in front.
-pub fn suite(scene: &SuiteScene, frames: usize, fps: f64, pond: &Pond, eye: &Vector3<f64>, rng: &mut Rng) -> Motion {
-    let mut bodies = vec![FishBody::random(rng, MEAN_LENGTH_M)];
+pub fn suite(
+    scene: &SuiteScene,
+    frames: usize,
+    fps: f64,
+    pond: &Pond,
+    eye: &Vector3<f64>,
+    cohort: Cohort,
+    rng: &mut Rng,
+) -> Motion {
+    let mut bodies = vec![FishBody::random(rng, cohort)];
     let l = bodies[0].length;
     let duration = (frames.max(2) - 1) as f64 / fps;
     let (v0, v1) = match scene.profile {
@@ -380,7 +396,7 @@ pub fn suite(scene: &SuiteScene, frames: usize, fps: f64, pond: &Pond, eye: &Vec
     };
     let mid = 0.5 * duration;
     let occluder = if scene.occluded {
-        bodies.push(FishBody::random(rng, MEAN_LENGTH_M));
+        bodies.push(FishBody::random(rng, cohort));
         let (p_mid, _) = pose(mid);
         let q = eye + (p_mid - eye) * 0.55;
         // Cross perpendicular to the line of sight, opposite to the fish where it moves sideways.
@@ -425,7 +441,7 @@ mod tests {
         let mut rng = Rng::new(3);
         let act = Activity::swarm(&mut rng);
         let fps = 10.0;
-        let m = swarm(20, 600, fps, &pond, &act, &mut rng);
+        let m = swarm(20, 600, fps, &pond, &act, Cohort::default(), &mut rng);
         let means: Vec<f64> = m
             .states
             .iter()

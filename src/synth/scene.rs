@@ -63,6 +63,9 @@ pub enum Layout {
     /// E with each cube nudged, for a more complete depth range (the paper's choice; default).
     #[value(name = "F")]
     F,
+    /// No reference objects: the fish are the only ruler (`depth.scale = "fish"`, docs/pipeline.md).
+    #[value(name = "none")]
+    None,
 }
 
 impl Layout {
@@ -75,6 +78,7 @@ impl Layout {
             Self::D => "D",
             Self::E => "E",
             Self::F => "F",
+            Self::None => "none",
         }
     }
 }
@@ -125,6 +129,7 @@ pub fn reference_cubes(layout: Layout, pond: &Pond, camera: &Camera) -> Vec<Refe
         Layout::C => 6,
         Layout::D => 8,
         Layout::E | Layout::F => 10,
+        Layout::None => 0,
     };
     let s = pond.size;
     let (kx, ky, kz) = (s.x / 6.0, s.y / 4.0, s.z / 3.0);

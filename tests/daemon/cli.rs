@@ -307,9 +307,19 @@ fn each_broken_startup_input_exits_2_naming_the_file() {
     let no_ini = dir.path().join("no-ini");
     std::fs::create_dir_all(no_ini.join("img1")).expect("mkdir");
     let l = "[output.modbus]\nlisten = \"127.0.0.1:0\"\n";
+    let refs_only = "[depth]\nscale = \"references\"\n";
     let cases: Vec<(String, Option<&std::path::Path>, String)> = vec![
-        (format!("[camera]\ncalibration = \"{}\"\n{l}", one_ref.display()), None, one_ref.display().to_string()),
-        (format!("[camera]\ncalibration = \"{}\"\n{l}", no_ref.display()), None, no_ref.display().to_string()),
+        // Too few references is an error where they are the only ruler (`auto` takes the fish).
+        (
+            format!("[camera]\ncalibration = \"{}\"\n{refs_only}{l}", one_ref.display()),
+            None,
+            one_ref.display().to_string(),
+        ),
+        (
+            format!("[camera]\ncalibration = \"{}\"\n{refs_only}{l}", no_ref.display()),
+            None,
+            no_ref.display().to_string(),
+        ),
         (format!("[camera]\ncalibration = \"/nonexistent/calib.json\"\n{l}"), None, "/nonexistent/calib.json".into()),
         (format!("[detector]\nmodel = \"{}\"\n{l}", corrupt.display()), None, corrupt.display().to_string()),
         (format!("[detector]\nmodel = \"/nonexistent/det.onnx\"\n{l}"), None, "/nonexistent/det.onnx".into()),

@@ -1,0 +1,250 @@
+//! The fish as the ruler (not in the paper; docs/pipeline.md, "The fish as the ruler").
+//!
+//! A fish of length `L` seen broadside spans the angle `L / range`, so a tracked fish is a reference
+//! object at its own depth once its broadside length is known. Its angular length alone does not
+//! tell it: the fish moves nearer and farther over its track. [`Rulers`] keeps, per fish and depth
+//! frame, its box's angular length and the relative inverse depth sampled at it; with the fit in use
+//! each look becomes a metric length (angle times range), and their [`LENGTH_QUANTILE`] is the fish's
+//! broadside length `l` under that fit. The fish's pair is then (its relative value now, its fitted
+//! depth now times `L / l`): a fit off by a factor is corrected in one step. Before any fit, the
+//! angular lengths alone give a first one ([`ruler_depth`]). The same eq. 2 family is fitted over the
+//! pairs by [`fit_robust`], with a tolerance from the cohort's spread, so fish whose length or box is
+//! off are rejected. The cohort's mean length `L` sets the scale: a length 10 % off scales every depth, and
+//! so every speed in m/s, by 10 %; speeds in body lengths per second do not depend on it.
+
+use super::fit::{DepthModel, FitError, ReferencePair, ScaleShift, fit_robust};
+use super::method::DepthFit;
+use crate::geometry::{Intrinsics, Pixel};
+use crate::units::Metres;
+
+/// Depth frames a fish must have been seen in before its broadside length is trusted.
+pub const MIN_LOOKS: usize = 10;
+
+/// Looks kept per fish (the most recent; at 5 depth frames/s, 12.8 s).
+pub const LOOKS: usize = 64;
+
+/// Quantile of a fish's lengths taken as its broadside length (as [`crate::motion::heading`]).
+pub const LENGTH_QUANTILE: f64 = crate::motion::heading::LENGTH_QUANTILE;
+
+/// A fish not seen in a depth frame for this long is forgotten, s.
+pub const RULER_TIMEOUT_S: f64 = 1.0;
+
+/// `depth.scale = "auto"` keeps the references while at least this many are visible ...
+pub const AUTO_MIN_REFERENCES: usize = 3;
+
+/// ... and their fit's RMS residual is at most this, m.
+pub const AUTO_MAX_RESIDUAL_M: f64 = 0.15;
+
+/// Fish rulers (plus references) a fit needs.
+pub const MIN_RULERS: usize = 3;
+
+/// Time constant of the smoothing of the fish fit's scale and shift, s (the fish in view change from
+/// frame to frame; the water and the camera do not).
+pub const FISH_FIT_SMOOTHING_S: f64 = 2.0;
+
+/// Camera z of a fish of `length` whose box centre is at `centre` and whose broadside angular length
+/// is `broadside_rad`: range `length / angle`, along the ray through the centre. `None` for a
+/// non-positive or non-finite angle or length.
+pub fn ruler_depth(intrinsics: &Intrinsics, centre: Pixel, broadside_rad: f64, length: Metres) -> Option<Metres> {
+    if !(broadside_rad.is_finite() && broadside_rad > 0.0 && length.0.is_finite() && length.0 > 0.0) {
+        return None;
+    }
+    let ray = intrinsics.ray(centre);
+    let z = length.0 / broadside_rad / ray.norm();
+    (z.is_finite() && z > 0.0).then_some(Metres(z))
+}
+
+/// The fit over fish rulers (and any references among `pairs`): the inverse model by [`fit_robust`],
+/// a pair an inlier within 0.1 m or twice the cohort's length spread `length_cv` (at least 5 %).
+pub fn fit_rulers(pairs: &[ReferencePair], length_cv: f64) -> Result<ScaleShift, FitError> {
+    let usable = pairs.iter().filter(|p| p.relative.is_finite() && p.depth.0 > 0.0).count();
+    if usable < MIN_RULERS {
+        return Err(FitError::TooFewReferences { usable, needed: MIN_RULERS });
+    }
+    fit_robust(DepthModel::Inverse, pairs, Metres(0.1), (2.0 * length_cv).max(0.05))
+}
+
+/// One look at a fish in a depth frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Look {
+    /// The box's angular length, radians.
+    angle: f64,
+    /// Relative inverse depth sampled at the fish.
+    relative: f64,
+    /// Range over camera z along the ray through the box centre (at least 1).
+    ray_norm: f64,
+}
+
+#[derive(Debug, Clone)]
+struct RulerFish {
+    id: u32,
+    last_t: f64,
+    looks: heapless::Deque<Look, LOOKS>,
+}
+
+/// The fish's looks over their tracks, for the fish fit (module documentation). Allocated once.
+#[derive(Debug, Clone)]
+pub struct Rulers {
+    fish: Vec<RulerFish>,
+    capacity: usize,
+    scratch: Vec<f64>,
+}
+
+impl Rulers {
+    /// A table for at most `capacity` fish.
+    pub fn new(capacity: usize) -> Self {
+        Self { fish: Vec::with_capacity(capacity), capacity, scratch: Vec::with_capacity(LOOKS) }
+    }
+
+    /// Forgets every fish.
+    pub fn clear(&mut self) {
+        self.fish.clear();
+    }
+
+    /// Records fish `id` in the depth frame at `t_s`: its box's angular length `angle` (radians) at
+    /// `centre`, and the relative inverse depth `relative` sampled at it. Fish not seen for
+    /// [`RULER_TIMEOUT_S`] are dropped first; a full table ignores new fish.
+    pub fn look(&mut self, t_s: f64, id: u32, intrinsics: &Intrinsics, centre: Pixel, angle: f64, relative: f64) {
+        if !(angle.is_finite() && angle > 0.0 && relative.is_finite()) {
+            return;
+        }
+        let i = match self.fish.iter().position(|f| f.id == id) {
+            Some(i) => i,
+            None => {
+                self.fish.retain(|f| t_s - f.last_t <= RULER_TIMEOUT_S);
+                if self.fish.len() >= self.capacity {
+                    return;
+                }
+                self.fish.push(RulerFish { id, last_t: t_s, looks: heapless::Deque::new() });
+                self.fish.len() - 1
+            }
+        };
+        let f = &mut self.fish[i];
+        f.last_t = t_s;
+        if f.looks.is_full() {
+            f.looks.pop_front();
+        }
+        let _ = f.looks.push_back(Look { angle, relative, ray_norm: intrinsics.ray(centre).norm() });
+    }
+
+    /// The pair of fish `id` for a fit, from its latest look, when it has at least [`MIN_LOOKS`]: with
+    /// `fit` (the fit in use), its fitted depth now times `length` over its broadside length under
+    /// that fit; without, [`ruler_depth`] of the [`LENGTH_QUANTILE`] of its angular lengths.
+    pub fn pair(&mut self, id: u32, fit: Option<&DepthFit>, length: Metres) -> Option<ReferencePair> {
+        let f = self.fish.iter().find(|f| f.id == id)?;
+        if f.looks.len() < MIN_LOOKS {
+            return None;
+        }
+        let now = *f.looks.back()?;
+        self.scratch.clear();
+        match fit {
+            Some(fit) => {
+                let z_now = fit.depth(now.relative)?.0;
+                self.scratch
+                    .extend(f.looks.iter().filter_map(|l| fit.depth(l.relative).map(|z| l.angle * z.0 * l.ray_norm)));
+                let l = quantile(&mut self.scratch, LENGTH_QUANTILE)?;
+                let depth = z_now * length.0 / l;
+                (depth.is_finite() && depth > 0.0)
+                    .then_some(ReferencePair { relative: now.relative, depth: Metres(depth) })
+            }
+            None => {
+                self.scratch.extend(f.looks.iter().map(|l| l.angle));
+                let a = quantile(&mut self.scratch, LENGTH_QUANTILE)?;
+                let z = length.0 / a / now.ray_norm;
+                (z.is_finite() && z > 0.0).then_some(ReferencePair { relative: now.relative, depth: Metres(z) })
+            }
+        }
+    }
+}
+
+/// The `q` quantile of `values` (reordered; nearest rank); `None` when empty.
+fn quantile(values: &mut [f64], q: f64) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    let k = ((values.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
+    let (_, v, _) = values.select_nth_unstable_by(k, f64::total_cmp);
+    Some(*v)
+}
+
+/// Exponential smoothing of successive fish fits' scale and shift ([`FISH_FIT_SMOOTHING_S`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FitSmoother {
+    last: Option<(f64, ScaleShift)>,
+}
+
+impl FitSmoother {
+    /// Blends `fit` at time `t_s` into the running fit and returns it; the residual and counts are
+    /// the new fit's. A fit of another model, or time going backwards, starts over.
+    pub fn update(&mut self, t_s: f64, fit: ScaleShift) -> ScaleShift {
+        let out = match self.last {
+            Some((t0, prev)) if prev.model == fit.model && t_s > t0 => {
+                let a = 1.0 - (-(t_s - t0) / FISH_FIT_SMOOTHING_S).exp();
+                ScaleShift { s: prev.s + a * (fit.s - prev.s), t: prev.t + a * (fit.t - prev.t), ..fit }
+            }
+            _ => fit,
+        };
+        self.last = Some((t_s, out));
+        out
+    }
+
+    /// Forgets the running fit.
+    pub fn reset(&mut self) {
+        self.last = None;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_broadside_fish_is_at_its_length_over_its_angle() {
+        let k = Intrinsics::from_hfov(640, 384, 90.0).unwrap();
+        let centre = Pixel::new(k.cx, k.cy);
+        let z = ruler_depth(&k, centre, 0.35 / 3.0, Metres(0.35)).unwrap().0;
+        assert!((z - 3.0).abs() < 1e-9);
+        // Off the axis the range is along the ray: z is shorter.
+        let off = ruler_depth(&k, Pixel::new(k.cx + k.fx, k.cy), 0.35 / 3.0, Metres(0.35)).unwrap().0;
+        assert!((off - 3.0 / 2f64.sqrt()).abs() < 1e-9);
+        assert_eq!(ruler_depth(&k, centre, 0.0, Metres(0.35)), None);
+        assert_eq!(ruler_depth(&k, centre, 0.1, Metres(f64::NAN)), None);
+    }
+
+    #[test]
+    fn rulers_recover_the_scale_and_reject_odd_fish() {
+        // 1/D = 0.2 R + 0.05; 20 fish at 1.5-6 m, lengths +-10 %, two wildly off.
+        let mut pairs = heapless::Vec::<ReferencePair, 32>::new();
+        for i in 0..20 {
+            let d = 1.5 + 4.5 * i as f64 / 19.0;
+            let r = (1.0 / d - 0.05) / 0.2;
+            let err = if i == 3 {
+                1.8
+            } else if i == 11 {
+                0.5
+            } else {
+                1.0 + 0.1 * ((i as f64) * 2.3).sin()
+            };
+            let _ = pairs.push(ReferencePair { relative: r, depth: Metres(d * err) });
+        }
+        let f = fit_rulers(&pairs, 0.1).unwrap();
+        assert_eq!(f.rejected.count_ones(), 2, "{f:?}");
+        for d in [2.0, 4.0] {
+            let r = (1.0 / d - 0.05) / 0.2;
+            assert!((f.depth(r).unwrap().0 / d - 1.0).abs() < 0.05, "{d}: {f:?}");
+        }
+        assert!(matches!(fit_rulers(&pairs[..2], 0.1), Err(FitError::TooFewReferences { .. })));
+    }
+
+    #[test]
+    fn the_smoother_follows_with_its_time_constant() {
+        let f =
+            |s| ScaleShift { model: DepthModel::Inverse, s, t: 0.0, residual_rms: Metres(0.0), used: 3, rejected: 0 };
+        let mut sm = FitSmoother::default();
+        assert_eq!(sm.update(0.0, f(1.0)).s, 1.0);
+        let s = sm.update(FISH_FIT_SMOOTHING_S, f(2.0)).s;
+        assert!((s - (2.0 - (-1f64).exp())).abs() < 1e-12);
+        sm.reset();
+        assert_eq!(sm.update(0.0, f(5.0)).s, 5.0);
+    }
+}

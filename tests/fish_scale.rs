@@ -1,0 +1,98 @@
+//! `depth.scale`: the fish as the ruler (docs/pipeline.md, "The fish as the ruler"). The fish fit
+//! recovers the metric scale on a scene without reference objects, `auto` turns to the fish when the
+//! references are hidden, and the new keys validate. Relative depth is the ground truth's, turned
+//! into an affine inverse depth (`--depth relative-gt`): no network is needed.
+
+use fme::config::Config;
+use fme::eval::{DepthChoice, EvalOptions, evaluate};
+use fme::metric::DepthScale;
+use fme::sequence::Sequence;
+use fme::synth::fish::Cohort;
+use fme::synth::{Layout, Preset, SynthConfig, generate};
+use fme::units::Metres;
+
+fn opts() -> EvalOptions {
+    EvalOptions { depth: DepthChoice::RelativeGt, ..Default::default() }
+}
+
+#[test]
+fn the_fish_fit_recovers_the_scale_without_references() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("none");
+    let cfg = SynthConfig {
+        preset: Preset::Swarm,
+        fish: 20,
+        frames: 150,
+        seed: 31,
+        width: 320,
+        height: 192,
+        layout: Layout::None,
+        cohort: Cohort { mean_length_m: 0.35, length_cv: 0.1 },
+        ..SynthConfig::default()
+    };
+    generate(&cfg, &out, false, &|_| {}).unwrap();
+    let seq = Sequence::open(&out).unwrap();
+    assert!(seq.meta.reference_objects.is_empty());
+    let r = evaluate(&seq, &Config::default(), &opts()).unwrap();
+    assert_eq!(r.scale_source, "fish");
+    assert_eq!(r.references_visible, 0);
+    // The scale within 10 % (the cohort's lengths spread 10 %; the fit pools 20 fish).
+    let ratio = r.mean_est_mps / r.mean_true_mps;
+    assert!((ratio - 1.0).abs() < 0.1, "est {} true {}", r.mean_est_mps, r.mean_true_mps);
+    assert!(r.speed_distcorr > 0.8, "distcorr {}", r.speed_distcorr);
+    // Body lengths per second are scored against each fish's own length.
+    assert!(r.bls_rmse.is_some_and(|e| e < 0.25), "{:?}", r.bls_rmse);
+    // A configured length 10 % long scales the speed by 10 %; body lengths/s stay.
+    let mut long = Config::default();
+    long.motion.body_length_m = Metres(0.385);
+    let l = evaluate(&seq, &long, &opts()).unwrap();
+    let k = l.mean_est_mps / r.mean_est_mps;
+    assert!((k - 1.1).abs() < 0.03, "speed ratio {k}");
+    // `references` on a scene without any: no fit, nothing to score.
+    let mut refs = Config::default();
+    refs.depth.scale = DepthScale::References;
+    assert!(evaluate(&seq, &refs, &opts()).is_err());
+}
+
+#[test]
+fn auto_turns_to_the_fish_when_the_references_are_hidden() {
+    let seq = Sequence::open(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/swarm20")).unwrap();
+    let cfg = Config::default();
+    let clean = evaluate(&seq, &cfg, &opts()).unwrap();
+    assert_eq!(clean.scale_source, "references");
+    // 8 of the 10 references hidden after 1 s: too few for `auto`, which takes the fish (with the
+    // two left); `references` goes on with two.
+    let hidden = EvalOptions { hide_refs: Some((8, 1.0)), ..opts() };
+    let auto = evaluate(&seq, &cfg, &hidden).unwrap();
+    assert_eq!(auto.scale_source, "fish");
+    assert!(auto.frames + 5 >= clean.frames, "{} vs {} frames", auto.frames, clean.frames);
+    assert!(
+        (auto.mean_est_mps - clean.mean_est_mps).abs() < 0.1 * clean.mean_est_mps,
+        "{} vs {}",
+        auto.mean_est_mps,
+        clean.mean_est_mps
+    );
+    // All hidden: `references` keeps its last fit, `auto` fits on the fish alone.
+    let all = EvalOptions { hide_refs: Some((10, 1.0)), ..opts() };
+    assert_eq!(evaluate(&seq, &cfg, &all).unwrap().scale_source, "fish");
+}
+
+#[test]
+fn the_scale_keys_validate() {
+    let mut c = Config::default();
+    assert_eq!(c.depth.scale, DepthScale::Auto);
+    assert!((c.motion.body_length_cv - 0.1).abs() < 1e-12);
+    c.depth.scale = DepthScale::Fish;
+    assert!(c.validate().is_ok());
+    c.motion.body_length_m = Metres(0.0);
+    assert_eq!(c.validate().unwrap_err().0, "depth.scale");
+    let mut c = Config::default();
+    c.motion.body_length_cv = 0.9;
+    assert_eq!(c.validate().unwrap_err().0, "motion.body_length_cv");
+    let text = "[depth]\nscale = \"ruler\"\n";
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("bad.toml");
+    std::fs::write(&p, text).unwrap();
+    let e = Config::load_with(Some(&p), &[]).unwrap_err().to_string();
+    assert!(e.contains("scale"), "{e}");
+}
