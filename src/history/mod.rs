@@ -40,7 +40,7 @@ const DAY_MS: i64 = 86_400_000;
 /// One output update, as written to the history.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Row {
-    /// Wall-clock time of the update, ms since 1970-01-01 UTC.
+    /// Wall-clock time of the update, ms since the Unix epoch (UTC).
     pub unix_ms: i64,
     /// Swarm mean speed (paper eq. 5), m/s; NaN when stale or unavailable.
     pub activity_mps: f64,
@@ -60,7 +60,7 @@ pub struct Row {
     pub feeding: bool,
 }
 
-/// Days since 1970-01-01 of a proleptic Gregorian date (H. Hinnant's `days_from_civil`).
+/// Days since the Unix epoch of a proleptic Gregorian date (H. Hinnant's `days_from_civil`).
 pub fn days_from_civil(y: i64, m: u32, d: u32) -> i64 {
     let y = if m <= 2 { y - 1 } else { y };
     let era = y.div_euclid(400);
@@ -71,7 +71,7 @@ pub fn days_from_civil(y: i64, m: u32, d: u32) -> i64 {
     era * 146_097 + doe - 719_468
 }
 
-/// The date (year, month, day) of a day number since 1970-01-01 (inverse of [`days_from_civil`]).
+/// The date (year, month, day) of a day number since the Unix epoch (inverse of [`days_from_civil`]).
 pub fn civil_from_days(z: i64) -> (i64, u32, u32) {
     let z = z + 719_468;
     let era = z.div_euclid(146_097);
@@ -115,7 +115,7 @@ pub fn day_path(dir: &Path, day: i64) -> PathBuf {
     dir.join(format!("{}.csv", day_name(day)))
 }
 
-/// Appends RFC 3339 UTC time with milliseconds (`2026-12-04T16:14:34.123Z`).
+/// Appends RFC 3339 UTC time with milliseconds (`YYYY-MM-DDThh:mm:ss.sssZ`).
 pub fn format_time(unix_ms: i64, out: &mut String) {
     let (y, mo, d) = civil_from_days(day_of(unix_ms));
     let ms = unix_ms.rem_euclid(DAY_MS);
