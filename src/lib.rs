@@ -28,6 +28,7 @@
 #![warn(missing_docs)]
 
 pub mod assign;
+pub mod backoff;
 pub mod calib;
 pub mod capture;
 pub mod cli;

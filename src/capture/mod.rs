@@ -12,6 +12,9 @@ pub use v4l2::V4l2Source;
 /// Frames are the pipeline's input type; capture produces them.
 pub use crate::pipeline::{Frame, PixelFormat};
 
+/// The reconnect policy the sources share with the other edges.
+pub use crate::backoff::Backoff;
+
 use std::path::PathBuf;
 
 /// A capture failure. Sources recover from these themselves where they can (reconnect with backoff).
@@ -69,45 +72,5 @@ pub trait FrameSource: Send {
     /// Frames lost before they reached us (V4L2: gaps in the driver's sequence numbers).
     fn source_dropped(&self) -> u64 {
         0
-    }
-}
-
-/// Exponential backoff between `min` and `max`, doubling after each failure, reset on success.
-#[derive(Debug, Clone, Copy)]
-pub struct Backoff {
-    min: std::time::Duration,
-    max: std::time::Duration,
-    next: std::time::Duration,
-}
-
-impl Backoff {
-    /// Backoff from `min` doubling up to `max`.
-    pub fn new(min: std::time::Duration, max: std::time::Duration) -> Self {
-        Self { min, max: max.max(min), next: min }
-    }
-    /// The delay to wait now; the following one is doubled (capped).
-    pub fn next_delay(&mut self) -> std::time::Duration {
-        let d = self.next;
-        self.next = (self.next * 2).min(self.max);
-        d
-    }
-    /// Back to the shortest delay after a success.
-    pub fn reset(&mut self) {
-        self.next = self.min;
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use std::time::Duration;
-
-    #[test]
-    fn backoff_doubles_caps_and_resets() {
-        let mut b = Backoff::new(Duration::from_millis(100), Duration::from_millis(350));
-        let d: Vec<_> = (0..4).map(|_| b.next_delay().as_millis()).collect();
-        assert_eq!(d, vec![100, 200, 350, 350]);
-        b.reset();
-        assert_eq!(b.next_delay().as_millis(), 100);
     }
 }

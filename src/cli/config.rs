@@ -22,7 +22,11 @@ pub enum Action {
     /// Print the effective configuration as TOML: the defaults, the file (if given) and the `--set`s.
     Show {
         /// The configuration file (default: the built-in defaults).
+        #[arg(conflicts_with = "config")]
         file: Option<PathBuf>,
+        /// The same as FILE, as every other command spells it.
+        #[arg(long, short, value_name = "FILE")]
+        config: Option<PathBuf>,
         /// Override one key: `--set section.key=value` (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
@@ -37,7 +41,8 @@ pub fn run(args: ConfigCmdArgs) -> anyhow::Result<()> {
             c.load(&[])?;
             super::write_stdout(&format!("{}: ok\n", file.display()))
         }
-        Action::Show { file, set } => {
+        Action::Show { file, config, set } => {
+            let file = file.or(config);
             let (cfg, _) = ConfigArgs { config: file, set }.load(&[])?;
             super::write_stdout(&cfg.to_toml())
         }

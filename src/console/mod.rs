@@ -481,7 +481,7 @@ pub fn serve(port: &mut serialport::TTYPort, shared: &Shared, bank: &RegisterBan
 
 /// Opens `device` and serves the console, reopening with backoff after errors, until a stop.
 pub fn run_on_device(device: &str, baud: u32, echo: bool, shared: &Shared, bank: &RegisterBank) {
-    let mut backoff = crate::capture::Backoff::new(Duration::from_millis(500), Duration::from_secs(30));
+    let mut backoff = crate::backoff::Backoff::new(Duration::from_millis(500), Duration::from_secs(30));
     while !shared.stopping() {
         match serialport::new(device, baud).timeout(Duration::from_millis(100)).open_native() {
             Ok(mut port) => {

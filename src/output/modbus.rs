@@ -15,7 +15,7 @@ use super::log_throttle::LogThrottle;
 use super::modbus_guard::{FrameError, MAX_PDU, RtuSplit, answer, answer_pdu, crc_ok, crc16, read_frame, rtu_split};
 use super::registers::{BLOCK_LEN, HR_WRITABLE_LEN, HR_WRITABLE_START};
 use super::tcp_conns::{Connections, GuardedStream, TcpLimits};
-use crate::capture::Backoff;
+use crate::backoff::Backoff;
 use crate::config::{ModbusConfig, Parity};
 use std::future::Future;
 use std::net::SocketAddr;

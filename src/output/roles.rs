@@ -5,7 +5,7 @@
 
 use super::bank::RegisterBank;
 use super::modbus::{self, ClientSettings, ClientTarget, ModbusError};
-use crate::capture::Backoff;
+use crate::backoff::Backoff;
 use crate::config::{Config, ModbusMode};
 use crate::status::Shared;
 use std::net::SocketAddr;

@@ -187,7 +187,7 @@ impl Default for TrackerConfig {
 
 /// What a `[tracker]` section may set: a preset and any key over it.
 #[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, expecting = "a [tracker] table (preset and tracker keys)")]
 struct Patch {
     preset: Option<TrackerPreset>,
     mode: Option<Mode>,
