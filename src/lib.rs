@@ -31,6 +31,7 @@ pub mod assign;
 pub mod backoff;
 pub mod calib;
 pub mod capture;
+pub mod civil;
 pub mod cli;
 pub mod config;
 pub mod console;

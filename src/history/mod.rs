@@ -60,31 +60,9 @@ pub struct Row {
     pub feeding: bool,
 }
 
-/// Days since the Unix epoch of a proleptic Gregorian date (H. Hinnant's `days_from_civil`).
-pub fn days_from_civil(y: i64, m: u32, d: u32) -> i64 {
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let mp = (i64::from(m) + 9) % 12;
-    let doy = (153 * mp + 2) / 5 + i64::from(d) - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146_097 + doe - 719_468
-}
+use crate::civil::{civil_from_days, days_from_civil};
 
-/// The date (year, month, day) of a day number since the Unix epoch (inverse of [`days_from_civil`]).
-pub fn civil_from_days(z: i64) -> (i64, u32, u32) {
-    let z = z + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    (if m <= 2 { yoe + era * 400 + 1 } else { yoe + era * 400 }, m, d)
-}
-
-/// UTC day number of a time in ms since 1970.
+/// UTC day number of a time in ms since the Unix epoch.
 pub fn day_of(unix_ms: i64) -> i64 {
     unix_ms.div_euclid(DAY_MS)
 }
@@ -661,26 +639,20 @@ mod tests {
     }
 
     #[test]
-    fn civil_round_trip() {
-        assert_eq!(days_from_civil(1970, 1, 1), 0);
-        assert_eq!(civil_from_days(days_from_civil(2000, 2, 29)), (2000, 2, 29));
-        assert_eq!(day_name(days_from_civil(2026, 12, 4)), "2026-12-04");
-        for z in -800_000..800_000 {
-            let (y, m, d) = civil_from_days(z);
-            assert_eq!(days_from_civil(y, m, d), z);
-        }
-        assert_eq!(parse_day("2026-02-29"), None);
-        assert_eq!(parse_day("2024-02-29"), Some(days_from_civil(2024, 2, 29)));
-        assert_eq!(parse_day("2024-2-29"), None);
-        assert_eq!(parse_day("2024-13-01"), None);
+    fn day_names_parse_and_print() {
+        assert_eq!(day_name(days_from_civil(2126, 12, 4)), "2126-12-04");
+        assert_eq!(parse_day("2126-02-29"), None);
+        assert_eq!(parse_day("2124-02-29"), Some(days_from_civil(2124, 2, 29)));
+        assert_eq!(parse_day("2124-2-29"), None);
+        assert_eq!(parse_day("2124-13-01"), None);
     }
 
     #[test]
     fn row_round_trip() {
-        let t = days_from_civil(2026, 12, 4) * DAY_MS + 16 * 3_600_000 + 14 * 60_000 + 34_123;
+        let t = days_from_civil(2126, 12, 4) * DAY_MS + 16 * 3_600_000 + 14 * 60_000 + 34_123;
         let mut s = String::new();
         format_time(t, &mut s);
-        assert_eq!(s, "2026-12-04T16:14:34.123Z");
+        assert_eq!(s, "2126-12-04T16:14:34.123Z");
         assert_eq!(parse_time(&s), Some(t));
         let r = row(t, 0.25);
         let mut line = String::new();
@@ -693,8 +665,8 @@ mod tests {
         line.clear();
         format_row(&nan, &mut line);
         assert!(parse_row(line.trim_end()).expect("parses").activity_mps.is_nan(), "{line}");
-        assert!(parse_row("2026-12-04T16:14:34.123Z,0.1").is_err());
-        assert!(parse_row("2026-12-04T16:14:34.123Z,x,,,1,,0,0,0").is_err());
+        assert!(parse_row("2126-12-04T16:14:34.123Z,0.1").is_err());
+        assert!(parse_row("2126-12-04T16:14:34.123Z,x,,,1,,0,0,0").is_err());
     }
 
     fn ms(y: i64, m: u32, d: u32, h: i64) -> i64 {
@@ -705,12 +677,12 @@ mod tests {
     fn day_rotation_and_keep_days() {
         let dir = tempfile::tempdir().expect("tempdir");
         // An old file and a foreign file: only the old day file is deleted.
-        std::fs::write(dir.path().join("2026-11-01.csv"), format!("{HEADER}\n")).expect("write");
+        std::fs::write(dir.path().join("2126-11-01.csv"), format!("{HEADER}\n")).expect("write");
         std::fs::write(dir.path().join("notes.txt"), "keep me").expect("write");
         let mut w = DayWriter::new(dir.path(), 3, 10.0);
         for d in 1..=5u32 {
             for h in [0, 12, 23] {
-                w.write(&row(ms(2026, 12, d, h), 0.1)).expect("write");
+                w.write(&row(ms(2126, 12, d, h), 0.1)).expect("write");
             }
         }
         w.sync().expect("sync");
@@ -720,15 +692,15 @@ mod tests {
             .map(|e| e.file_name().to_string_lossy().into_owned())
             .collect();
         names.sort();
-        assert_eq!(names, ["2026-12-03.csv", "2026-12-04.csv", "2026-12-05.csv", "notes.txt"]);
-        let f = read_day_file(&dir.path().join("2026-12-04.csv")).expect("read");
+        assert_eq!(names, ["2126-12-03.csv", "2126-12-04.csv", "2126-12-05.csv", "notes.txt"]);
+        let f = read_day_file(&dir.path().join("2126-12-04.csv")).expect("read");
         assert_eq!(f.rows.len(), 3);
         assert!(!f.torn_last_line);
-        assert!(f.rows.iter().all(|r| day_of(r.unix_ms) == days_from_civil(2026, 12, 4)));
+        assert!(f.rows.iter().all(|r| day_of(r.unix_ms) == days_from_civil(2126, 12, 4)));
         // Reopening the same day appends (a restart), and the header is written once.
         let mut w = DayWriter::new(dir.path(), 3, 0.0);
-        w.write(&row(ms(2026, 12, 5, 23) + 1000, 0.3)).expect("write");
-        let text = std::fs::read_to_string(dir.path().join("2026-12-05.csv")).expect("read");
+        w.write(&row(ms(2126, 12, 5, 23) + 1000, 0.3)).expect("write");
+        let text = std::fs::read_to_string(dir.path().join("2126-12-05.csv")).expect("read");
         assert_eq!(text.matches("time_utc").count(), 1);
         assert_eq!(text.lines().count(), 5);
     }
@@ -736,10 +708,10 @@ mod tests {
     #[test]
     fn torn_tail_is_skipped_by_the_reader_and_cut_by_the_writer() {
         let dir = tempfile::tempdir().expect("tempdir");
-        let p = day_path(dir.path(), days_from_civil(2026, 12, 4));
+        let p = day_path(dir.path(), days_from_civil(2126, 12, 4));
         let mut text = format!("{HEADER}\n");
-        format_row(&row(ms(2026, 12, 4, 1), 0.1), &mut text);
-        text.push_str("2026-12-04T02:00:00.000Z,0.1");
+        format_row(&row(ms(2126, 12, 4, 1), 0.1), &mut text);
+        text.push_str("2126-12-04T02:00:00.000Z,0.1");
         std::fs::write(&p, &text).expect("write");
         let f = read_day_file(&p).expect("a torn last line is not an error");
         assert_eq!((f.rows.len(), f.torn_last_line), (1, true));
@@ -749,32 +721,32 @@ mod tests {
         std::fs::write(&p, &bytes).expect("write");
         assert_eq!(read_day_file(&p).expect("read").rows.len(), 1);
         let mut w = DayWriter::new(dir.path(), 30, 0.0);
-        let rep = w.write(&row(ms(2026, 12, 4, 3), 0.2)).expect("write");
+        let rep = w.write(&row(ms(2126, 12, 4, 3), 0.2)).expect("write");
         assert!(rep.cut_bytes > 100, "{rep:?}");
         let f = read_day_file(&p).expect("read");
         assert_eq!((f.rows.len(), f.torn_last_line), (2, false));
         // A bad line in the middle is an error naming the file and line.
         std::fs::write(&p, format!("{HEADER}\nnonsense\n")).expect("write");
         let e = read_day_file(&p).expect_err("bad line").to_string();
-        assert!(e.contains("2026-12-04.csv:2:"), "{e}");
+        assert!(e.contains("2126-12-04.csv:2:"), "{e}");
     }
 
     #[test]
     fn disk_full_is_an_error_and_leaves_no_partial_line() {
         let dir = tempfile::tempdir().expect("tempdir");
-        let day = days_from_civil(2026, 12, 4);
+        let day = days_from_civil(2126, 12, 4);
         if !Path::new("/dev/full").exists() {
             return;
         }
         std::os::unix::fs::symlink("/dev/full", day_path(dir.path(), day)).expect("symlink");
         let mut w = DayWriter::new(dir.path(), 30, 0.0);
-        let e = w.write(&row(ms(2026, 12, 4, 1), 0.1)).expect_err("disk full");
+        let e = w.write(&row(ms(2126, 12, 4, 1), 0.1)).expect_err("disk full");
         assert_eq!(e.raw_os_error(), Some(libc::ENOSPC), "{e}");
     }
 
     #[test]
     fn hourly_summary() {
-        let base = ms(2026, 12, 4, 10);
+        let base = ms(2126, 12, 4, 10);
         let mut rows = Vec::new();
         for s in 0..7200 {
             // Hour 10: 0.1 m/s, no feeding; hour 11: 0.1..0.3 m/s, feeding for the last 30 min.
@@ -794,6 +766,6 @@ mod tests {
         assert!((h[2].feeding_s - 1799.0).abs() < 1e-9, "{}", h[2].feeding_s);
         let text = format_summary(&h, 0);
         assert_eq!(text.lines().count(), 4, "{text}");
-        assert!(text.lines().nth(3).is_some_and(|l| l.starts_with("2026-12-04 11:00") && l.contains("30.0")), "{text}");
+        assert!(text.lines().nth(3).is_some_and(|l| l.starts_with("2126-12-04 11:00") && l.contains("30.0")), "{text}");
     }
 }
