@@ -323,8 +323,7 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         seq.meta.height,
     );
     let fouled: Vec<Pixel> = refs.iter().take(opts.foul_refs).map(|(px, _)| px).collect();
-    let gt_seq = Sequence::open(&seq.dir)?;
-    let substitute = GroundTruth::new(gt_seq, box_input(seq, opts)?, depth_input, fouled);
+    let substitute = GroundTruth::new(seq.clone(), box_input(seq, opts)?, depth_input, fouled);
     let mut pipeline =
         FishPipeline::with_substitute(&cfg, calibration, Box::new(substitute)).map_err(EvalError::Model)?;
     let mut source = RecordedSource::open(&seq.dir, false, false)

@@ -217,11 +217,7 @@ impl FishPipeline {
 
     /// The depth map the pipeline samples now: the network's last map, or the substitute's.
     fn depth_view(&self) -> Option<&dyn DepthView> {
-        match (&self.depth, &self.substitute) {
-            (Some(net), _) => net.last_map().map(|m| m as &dyn DepthView),
-            (None, Some(s)) => s.depth(),
-            (None, None) => None,
-        }
+        depth_view(&self.depth, &self.substitute)
     }
 
     /// Starts over after time went backwards (camera restarted): tracks, speeds and schedules are
@@ -314,11 +310,8 @@ impl FishPipeline {
     fn fish_refit(&mut self, t_s: f64, length: crate::units::Metres, refs: References, fit: bool) {
         self.views.clear();
         self.views.extend(self.estimator.tracks());
-        let view = match (&self.depth, &self.substitute) {
-            (Some(net), _) => net.last_map().map(|m| m as &dyn DepthView),
-            (None, Some(s)) => s.depth(),
-            (None, None) => None,
-        };
+        // Field by field, so the estimator can be borrowed mutably beside it.
+        let view = depth_view(&self.depth, &self.substitute);
         let Some(view) = view else { return };
         let mut pairs = refs.clone();
         let intrinsics = self.estimator.camera().intrinsics;
@@ -432,6 +425,15 @@ impl FishPipeline {
     }
 }
 
+/// The depth map sampled now: the network's last map, or the substitute's.
+fn depth_view<'a>(net: &'a Option<DepthNet>, sub: &'a Option<Box<dyn Substitute>>) -> Option<&'a dyn DepthView> {
+    match (net, sub) {
+        (Some(net), _) => net.last_map().map(|m| m as &dyn DepthView),
+        (None, Some(s)) => s.depth(),
+        (None, None) => None,
+    }
+}
+
 /// A camera for an uncalibrated box (no speeds are reported without a fit, so only the image size
 /// matters): 90 degrees horizontal field of view, identity pose.
 fn fallback_camera(cfg: &Config) -> Camera {
@@ -502,11 +504,8 @@ impl Pipeline for FishPipeline {
         self.health.tracks = self.obs.len() as u32;
         self.health.detector_hz = self.det_rate.hz();
         self.health.depth_hz = self.depth_rate.hz();
-        let view = match (&self.depth, &self.substitute) {
-            (Some(net), _) => net.last_map().map(|m| m as &dyn DepthView),
-            (None, Some(s)) => s.depth(),
-            (None, None) => None,
-        };
+        // Field by field, so the estimator can be borrowed mutably beside it.
+        let view = depth_view(&self.depth, &self.substitute);
         let (fit, how, obs) = (self.fit.as_ref(), self.cfg.depth.sample, &self.obs);
         let s = self.estimator.update_with(t, obs, |o, px| {
             let view = view?;
@@ -550,7 +549,7 @@ impl Pipeline for FishPipeline {
         self.calib
     }
 
-    fn frame_view(&self, out: &mut FrameView) {
+    fn frame_view(&self, out: &mut FrameView, references: bool) {
         out.clear();
         out.detected = self.ran.detect;
         if self.ran.detect {
@@ -563,6 +562,9 @@ impl Pipeline for FishPipeline {
             depth_m: v.depth.map_or(f64::NAN, |d| d.0),
             speed_mps: v.speed.map_or(f64::NAN, |s| s.0),
         }));
+        if !references {
+            return;
+        }
         // Each reference with the fit's residual there (eq. 1-2): which one was measured wrong or
         // is fouled shows at a glance.
         let (view, fit) = (self.depth_view(), self.fit.as_ref());

@@ -133,8 +133,10 @@ pub trait Pipeline: Send {
         Ok(())
     }
     /// Fills `out` with what the last frame produced (the black box and snapshots,
-    /// docs/recording.md). The default: nothing.
-    fn frame_view(&self, out: &mut FrameView) {
+    /// docs/recording.md): detections and tracks; the references only with `references` (they cost
+    /// a depth reading each, so only snapshots ask for them). The default: nothing.
+    fn frame_view(&self, out: &mut FrameView, references: bool) {
+        let _ = references;
         out.clear();
     }
     /// Metric depth (m, NaN where unknown) on a `cols` x `rows` grid of cell centres over a

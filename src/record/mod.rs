@@ -323,7 +323,7 @@ impl Recorder {
             }
             None => r.frame = Some(frame.clone()),
         }
-        pipeline.frame_view(&mut r.view);
+        pipeline.frame_view(&mut r.view, snap);
         r.sample = sample;
         r.ring = self.ring;
         r.snapshot = snap;
@@ -409,7 +409,7 @@ pub fn snapshot_now(
     keep: usize,
 ) -> Result<PathBuf, String> {
     let mut view = FrameView::default();
-    pipeline.frame_view(&mut view);
+    pipeline.frame_view(&mut view, true);
     let mut depth = Vec::new();
     let has_depth = pipeline.depth_grid((frame.width, frame.height), snapshot::DEPTH_GRID, &mut depth);
     let name = format!("{}-{:08}", freeze::utc_stamp(std::time::SystemTime::now()), frame.seq);
