@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Installs what fme needs to build, test and run, idempotently. Safe to run again and again.
 # - libclang-dev: bindgen for the v4l crate's V4L2 bindings.
+# - mosquitto: the MQTT broker the MQTT tests and `make bench-mqtt` start on a loopback port of their
+#   own (Debian installs it to /usr/sbin; the system service is not started here).
 # - ONNX Runtime 1.31.1 shared library, taken from the PyPI onnxruntime wheel (no binary downloads
 #   outside the package registries) and placed in .ort/lib, where the fme binary looks for it.
 set -euo pipefail
@@ -15,6 +17,8 @@ need_apt=()
 dpkg -s libclang-dev >/dev/null 2>&1 || need_apt+=(libclang-dev)
 dpkg -s pkg-config >/dev/null 2>&1 || need_apt+=(pkg-config)
 command -v unzip >/dev/null 2>&1 || need_apt+=(unzip)
+# mosquitto_passwd (for the wrong-password test) comes with the same package.
+command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ] || need_apt+=(mosquitto)
 if [ ${#need_apt[@]} -gt 0 ]; then
   echo "setup: installing ${need_apt[*]} with apt" >&2
   $SUDO apt-get update -q >/dev/null

@@ -226,6 +226,45 @@ impl Config {
         if let Err(e) = allow::AllowList::parse(&m.allow) {
             return err("output.modbus.allow", e);
         }
+        let q = &self.output.mqtt;
+        if q.enabled && !is_host_port(&q.broker) {
+            return err("output.mqtt.broker", format!("must be HOST:PORT, got {:?}", q.broker));
+        }
+        if !valid_topic_level(&q.prefix) || q.prefix.is_empty() {
+            return err(
+                "output.mqtt.prefix",
+                format!("must be a non-empty topic level without / + # or spaces, got {:?}", q.prefix),
+            );
+        }
+        if !valid_topic_level(&q.box_id) {
+            return err(
+                "output.mqtt.box_id",
+                format!("must be a topic level without / + # or spaces (empty = host name), got {:?}", q.box_id),
+            );
+        }
+        if q.qos > 1 {
+            return err("output.mqtt.qos", format!("must be 0 or 1, got {}", q.qos));
+        }
+        if q.keepalive_s < 5 || q.keepalive_s > 3600 {
+            return err("output.mqtt.keepalive_s", format!("must be 5..=3600 s, got {}", q.keepalive_s));
+        }
+        if q.queue_messages == 0 || q.queue_messages > 100_000 {
+            return err("output.mqtt.queue_messages", format!("must be 1..=100000, got {}", q.queue_messages));
+        }
+        if q.reconnect_min_ms == 0 || q.reconnect_min_ms > q.reconnect_max_ms {
+            return err("output.mqtt.reconnect_min_ms", "must be > 0 and <= output.mqtt.reconnect_max_ms");
+        }
+        if q.cert_file.as_os_str().is_empty() != q.key_file.as_os_str().is_empty() {
+            let key = if q.key_file.as_os_str().is_empty() { "output.mqtt.key_file" } else { "output.mqtt.cert_file" };
+            return err(key, "a client certificate needs both output.mqtt.cert_file and output.mqtt.key_file");
+        }
+        let tls_files = !q.ca_file.as_os_str().is_empty() || !q.cert_file.as_os_str().is_empty();
+        if tls_files && !q.tls {
+            return err("output.mqtt.tls", "must be true when output.mqtt.ca_file or cert_file is set");
+        }
+        if !q.password_file.as_os_str().is_empty() && q.username.is_empty() {
+            return err("output.mqtt.username", "must be set when output.mqtt.password_file is set");
+        }
         if self.output.serial.baud == 0 {
             return err("output.serial.baud", "must be > 0");
         }
@@ -283,6 +322,12 @@ impl Config {
         }
         Ok(())
     }
+}
+
+/// Whether `s` may be one level of an MQTT topic: no `/`, no wildcards `+` `#`, no spaces or
+/// control characters, at most 64 bytes (empty is allowed here; callers decide).
+pub fn valid_topic_level(s: &str) -> bool {
+    s.len() <= 64 && !s.chars().any(|c| c == '/' || c == '+' || c == '#' || c.is_whitespace() || c.is_control())
 }
 
 /// Whether `s` looks like `HOST:PORT` (an IPv4/IPv6 socket address, or a host name and a port).
@@ -390,6 +435,27 @@ mod tests {
         }
         let e = parse("[output]\nrate_hz = -1.0\n").err();
         assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.rate_hz"));
+    }
+
+    #[test]
+    fn mqtt_keys_checked() {
+        for (text, key) in [
+            ("enabled = true\nbroker = \"nohost\"", "output.mqtt.broker"),
+            ("prefix = \"a/b\"", "output.mqtt.prefix"),
+            ("box_id = \"cage#1\"", "output.mqtt.box_id"),
+            ("qos = 2", "output.mqtt.qos"),
+            ("keepalive_s = 1", "output.mqtt.keepalive_s"),
+            ("queue_messages = 0", "output.mqtt.queue_messages"),
+            ("reconnect_min_ms = 90000", "output.mqtt.reconnect_min_ms"),
+            ("tls = true\ncert_file = \"c.pem\"", "output.mqtt.key_file"),
+            ("ca_file = \"ca.pem\"", "output.mqtt.tls"),
+            ("password_file = \"/etc/fme/pw\"", "output.mqtt.username"),
+        ] {
+            let e = parse(&format!("[output.mqtt]\n{text}\n")).err();
+            assert_eq!(e.as_ref().and_then(|e| e.key()), Some(key), "{text}: {e:?}");
+        }
+        let c = parse("[output.mqtt]\nenabled = true\nbroker = \"broker.farm:8883\"\ntls = true\n").expect("valid");
+        assert_eq!(c.output.mqtt.qos, 1);
     }
 
     #[test]

@@ -121,11 +121,79 @@ pub struct OutputConfig {
     pub modbus: ModbusConfig,
     /// `[output.serial]`.
     pub serial: SerialLineConfig,
+    /// `[output.mqtt]`: fleet telemetry to an MQTT broker (docs/mqtt.md).
+    pub mqtt: MqttConfig,
 }
 
 impl Default for OutputConfig {
     fn default() -> Self {
-        Self { rate_hz: 1.0, stale_after_s: 5.0, modbus: ModbusConfig::default(), serial: SerialLineConfig::default() }
+        Self {
+            rate_hz: 1.0,
+            stale_after_s: 5.0,
+            modbus: ModbusConfig::default(),
+            serial: SerialLineConfig::default(),
+            mqtt: MqttConfig::default(),
+        }
+    }
+}
+
+/// `[output.mqtt]`: activity, status, events and the effective config published to an MQTT broker
+/// under `<prefix>/<box_id>/` (docs/mqtt.md). The pipeline and Modbus never wait on it.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct MqttConfig {
+    /// Publish to the broker.
+    pub enabled: bool,
+    /// The broker, HOST:PORT (a name is resolved at each connect).
+    pub broker: String,
+    /// Client id and topic level of this box; empty = the host name.
+    pub box_id: String,
+    /// First topic level.
+    pub prefix: String,
+    /// QoS of every message: 0 (at most once) or 1 (at least once).
+    pub qos: u8,
+    /// MQTT keep-alive, s: the broker publishes the Last Will ("offline") after 1.5 x this without
+    /// a packet from a box that vanished without closing its connection.
+    pub keepalive_s: u64,
+    /// Messages held while the broker is away; when full, the oldest is dropped and counted.
+    pub queue_messages: usize,
+    /// First reconnect delay, ms (doubles up to `reconnect_max_ms`).
+    pub reconnect_min_ms: u64,
+    /// Longest reconnect delay, ms.
+    pub reconnect_max_ms: u64,
+    /// User name; empty = none.
+    pub username: String,
+    /// File holding the password (first line; read at each connect, never logged); empty = none.
+    pub password_file: PathBuf,
+    /// Connect with TLS (rustls).
+    pub tls: bool,
+    /// TLS: CA certificate(s) (PEM) the broker's certificate must chain to; empty = the system's roots.
+    pub ca_file: PathBuf,
+    /// TLS: client certificate chain (PEM), for brokers that require one; empty = none.
+    pub cert_file: PathBuf,
+    /// TLS: the client certificate's private key (PEM); needed with `cert_file`.
+    pub key_file: PathBuf,
+}
+
+impl Default for MqttConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            broker: "localhost:1883".into(),
+            box_id: String::new(),
+            prefix: "fme".into(),
+            qos: 1,
+            keepalive_s: 30,
+            queue_messages: 1000,
+            reconnect_min_ms: 1000,
+            reconnect_max_ms: 60_000,
+            username: String::new(),
+            password_file: PathBuf::new(),
+            tls: false,
+            ca_file: PathBuf::new(),
+            cert_file: PathBuf::new(),
+            key_file: PathBuf::new(),
+        }
     }
 }
 

@@ -105,6 +105,7 @@ fn status_words(bits: u16) -> String {
         (status::TOO_FEW_FISH, "too-few-fish"),
         (status::RECORD_FAULT, "record-fault"),
         (status::SCALE_FROM_FISH, "scale-from-fish"),
+        (status::TELEMETRY_FAULT, "telemetry-fault"),
     ];
     let v: Vec<&str> = names.iter().filter(|(b, _)| bits & b != 0).map(|(_, n)| *n).collect();
     if v.is_empty() { "-".into() } else { v.join(" ") }
@@ -142,6 +143,35 @@ pub fn activity_line(shared: &Shared, bank: &RegisterBank) -> String {
     }
 }
 
+/// The console `mqtt` text: link state, broker, queue, counters, last publish (age at `now_ms`).
+pub fn mqtt_text(m: &crate::status::MqttHealth, now_ms: i64) -> String {
+    if m.link == crate::status::MqttLink::Disabled {
+        return "mqtt disabled (output.mqtt.enabled = false)".into();
+    }
+    let last = match m.last_publish_unix_ms {
+        Some(t) => {
+            let mut s = String::new();
+            crate::history::format_time(t, &mut s);
+            format!("{s} ({:.1} s ago)", (now_ms - t).max(0) as f64 / 1000.0)
+        }
+        None => "never".into(),
+    };
+    format!(
+        "link {}\nbroker {}\nqueued {}\npublished {}\ndelivered-after-reconnect {}\ndropped {}\nreconnects {}\nconnect-attempts {}\nauth-failures {}\nlast-publish {}\nlast-error {}",
+        m.link.name(),
+        m.broker,
+        m.queued,
+        m.published,
+        m.delivered_after_reconnect,
+        m.dropped,
+        m.reconnects,
+        m.connect_attempts,
+        m.auth_failures,
+        last,
+        if m.last_error.is_empty() { "-" } else { &m.last_error },
+    )
+}
+
 const HELP: &str = "commands (case-insensitive; only snap and record save write, to the state directory):
   help            this list
   status          running state, status bits, fault, source, uptime
@@ -157,7 +187,8 @@ const HELP: &str = "commands (case-insensitive; only snap and record save write,
   config          the configuration file in use
   snap            snapshot of the next frame (overlays + depth map) into snapshots/
   record          black box state: ring size, drops, errors, last file
-  record save [l] freeze the black box into recordings/<UTC>-<l>/";
+  record save [l] freeze the black box into recordings/<UTC>-<l>/
+  mqtt            MQTT link state, queued, published, dropped, last publish (docs/mqtt.md)";
 
 impl Session {
     /// The partly typed line as echoed so far (to redraw it after a streamed line), if any.
@@ -391,6 +422,10 @@ last {}",
                 Ok(())
             }
             ("stream", _, _) => Err("usage: stream on|off".into()),
+            ("mqtt", None, _) => {
+                body.push_str(&mqtt_text(&shared.health().mqtt, crate::history::now_unix_ms()));
+                Ok(())
+            }
             ("config", None, _) => {
                 body.push_str(shared.config_text.trim_end());
                 if body.is_empty() {
@@ -399,7 +434,8 @@ last {}",
                 Ok(())
             }
             (
-                "help" | "?" | "status" | "version" | "activity" | "tracks" | "calib" | "regs" | "counters" | "config",
+                "help" | "?" | "status" | "version" | "activity" | "tracks" | "calib" | "regs" | "counters" | "config"
+                | "mqtt",
                 Some(_),
                 _,
             ) => Err(format!("`{cmd}` takes no argument")),

@@ -63,6 +63,9 @@ pub mod status {
     pub const RECORD_FAULT: u16 = 1 << 7;
     /// Bit 8: the metric scale in use comes from the fish, not the reference objects (`depth.scale`).
     pub const SCALE_FROM_FISH: u16 = 1 << 8;
+    /// Bit 9: telemetry fault: MQTT is on and the broker refused the login or the TLS handshake
+    /// failed (retried with backoff; docs/mqtt.md). The Modbus outputs are unaffected.
+    pub const TELEMETRY_FAULT: u16 = 1 << 9;
 }
 
 pub use crate::status::FaultCode;

@@ -6,6 +6,7 @@
 //!         -> Modbus TCP/RTU server tasks (PLC polls) | client task (FC16 per update) | serial line
 //!     -> Shared health <- console thread, keepalive task, live view
 //!     -> HistorySender (bounded, drop and count) -> fme-history thread -> day files (docs/history.md)
+//!     -> MqttSender (bounded, drop oldest and count) -> fme-mqtt thread -> broker (docs/mqtt.md)
 //! ```
 //! The pipeline thread pings the systemd watchdog each loop turn (a stuck `Pipeline::process` stops
 //! the pings and systemd restarts the service); a camera outage does not (the loop keeps turning).
@@ -428,6 +429,13 @@ impl Daemon {
         }
         // Publish a first block at once so a PLC never reads all zeros from a running box.
         let _ = publisher.lock().unwrap_or_else(|p| p.into_inner()).publish(&shared, Instant::now(), false);
+        if cfg.output.mqtt.enabled {
+            // After the first block: the broker hears from the box once its capture runs.
+            let (tx, thread) = crate::output::mqtt::spawn(&cfg, shared.clone())
+                .map_err(|error| ServiceError::Spawn { what: "mqtt", error })?;
+            publisher.lock().unwrap_or_else(|p| p.into_inner()).set_mqtt(Some(tx));
+            other_threads.push(thread);
+        }
 
         let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
         let roles = crate::output::roles::spawn(&cfg, &bank, &shared, stop_rx).await?;
@@ -616,6 +624,8 @@ impl Daemon {
             }
             // The "stopped" row is the history's last: the writer drains, fsyncs and ends.
             p.set_history(None);
+            // MQTT: delivers what it holds, publishes status "offline" (retained), disconnects.
+            p.set_mqtt(None);
         }
         let _ = self.stop_tx.send(true);
         if let Some(t) = self.client_task.take() {

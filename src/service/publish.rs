@@ -29,6 +29,8 @@ pub struct Publisher {
     stopped: bool,
     /// Every published update also goes to the history writer (never waits; `docs/history.md`).
     history: Option<crate::history::HistorySender>,
+    /// Every published update also goes to the MQTT publisher (never waits; docs/mqtt.md).
+    mqtt: Option<crate::output::mqtt::MqttSender>,
 }
 
 impl Publisher {
@@ -46,6 +48,7 @@ impl Publisher {
             line: String::with_capacity(128),
             stopped: false,
             history: None,
+            mqtt: None,
         }
     }
 
@@ -53,6 +56,12 @@ impl Publisher {
     /// finish once it has written what it holds).
     pub fn set_history(&mut self, tx: Option<crate::history::HistorySender>) {
         self.history = tx;
+    }
+
+    /// Sends every later update to the MQTT publisher (`None`: stop sending; the publisher then
+    /// says "offline" and disconnects once it has sent what it holds).
+    pub fn set_mqtt(&mut self, tx: Option<crate::output::mqtt::MqttSender>) {
+        self.mqtt = tx;
     }
 
     /// Computes the register inputs at `now` (pure apart from advancing the heartbeat and feeding rule).
@@ -100,6 +109,9 @@ impl Publisher {
         }
         if h.calib.source == crate::pipeline::ScaleSource::Fish {
             bits |= status::SCALE_FROM_FISH;
+        }
+        if h.mqtt.link == crate::status::MqttLink::AuthFailed {
+            bits |= status::TELEMETRY_FAULT;
         }
         let client = matches!(self.mode, ModbusMode::TcpClient | ModbusMode::RtuClient);
         let fault = if stopped {
@@ -152,16 +164,16 @@ impl Publisher {
             ModbusMode::TcpClient | ModbusMode::RtuClient => bank.client_link_ok(),
         };
         let ack = bank.writable()[usize::from(registers::HR_FEEDING_ACK - registers::HR_WRITABLE_START)];
-        let inp = shared.with_health(|h| {
+        let (inp, scale) = shared.with_health(|h| {
             let inp = self.inputs(h, link, ack, now, stopped);
             h.fault = inp.fault;
             h.feeding = inp.feeding;
             h.updates += 1;
-            inp
+            (inp, h.calib.source)
         });
         bank.publish(registers::encode(&inp, self.order));
-        if let Some(h) = &self.history {
-            h.send(crate::history::Row {
+        if self.history.is_some() || self.mqtt.is_some() {
+            let row = crate::history::Row {
                 unix_ms: crate::history::now_unix_ms(),
                 activity_mps: inp.mean_mps,
                 smoothed_mps: inp.smoothed_mps,
@@ -171,7 +183,13 @@ impl Publisher {
                 status: inp.status,
                 fault: inp.fault as u16,
                 feeding: inp.feeding,
-            });
+            };
+            if let Some(h) = &self.history {
+                h.send(row);
+            }
+            if let Some(m) = &mut self.mqtt {
+                m.send(row, scale);
+            }
         }
         self.last_publish = Some(now);
         crate::output::serial_line::format_line(&inp, &mut self.line);

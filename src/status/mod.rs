@@ -107,6 +107,8 @@ pub struct Health {
     pub tracks_text: String,
     /// The recorder (black box, snapshots).
     pub record: RecordHealth,
+    /// The MQTT telemetry link (docs/mqtt.md).
+    pub mqtt: MqttHealth,
 }
 
 /// State of the recorder (docs/recording.md), shown by the console `record` and `counters`.
@@ -132,6 +134,60 @@ pub struct RecordHealth {
     pub last: String,
     /// Snapshots written.
     pub snapshots: u64,
+}
+
+/// State of the MQTT link (`[output.mqtt]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MqttLink {
+    /// `output.mqtt.enabled = false`.
+    #[default]
+    Disabled,
+    /// Connecting or waiting to reconnect (broker away, network down).
+    Connecting,
+    /// Connected: messages flow.
+    Connected,
+    /// The broker refused the login (bad user name or password, not authorized) or the TLS
+    /// handshake failed: retried with backoff; status bit 9 is set.
+    AuthFailed,
+}
+
+impl MqttLink {
+    /// Name shown on the console and in the metrics.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Disabled => "disabled",
+            Self::Connecting => "connecting",
+            Self::Connected => "connected",
+            Self::AuthFailed => "auth-failed",
+        }
+    }
+}
+
+/// Counters of the MQTT publisher (docs/mqtt.md), shown by the console `mqtt`.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct MqttHealth {
+    /// Link state.
+    pub link: MqttLink,
+    /// The broker, HOST:PORT (empty when disabled).
+    pub broker: String,
+    /// Messages waiting in the queue now.
+    pub queued: u64,
+    /// Messages the broker acknowledged (QoS 1) or that were written to it (QoS 0).
+    pub published: u64,
+    /// Of those, messages that had waited in the queue while the link was down.
+    pub delivered_after_reconnect: u64,
+    /// Messages dropped: the queue was full (the oldest goes first).
+    pub dropped: u64,
+    /// Connections made after the first one.
+    pub reconnects: u64,
+    /// Connection attempts (successful or not).
+    pub connect_attempts: u64,
+    /// Connection attempts refused for the login or the certificate.
+    pub auth_failures: u64,
+    /// Wall-clock time of the last acknowledged message, ms since 1970 UTC.
+    pub last_publish_unix_ms: Option<i64>,
+    /// The last connection error (never contains the password).
+    pub last_error: String,
 }
 
 /// Requests from the console to the service (the console never calls the service directly): the
@@ -190,6 +246,7 @@ impl Health {
             latency: LatencyHistogram::default(),
             tracks_text: String::new(),
             record: RecordHealth::default(),
+            mqtt: MqttHealth::default(),
         }
     }
 }
