@@ -4,7 +4,7 @@
 CARGO ?= cargo
 BIN := target/release/fme
 
-.PHONY: all setup build test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer bench-history bench-anchors four-groups clean
+.PHONY: all setup build test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer bench-history bench-mqtt bench-anchors four-groups clean
 
 all: build
 
@@ -62,6 +62,10 @@ bench-track: build
 # Activity history cost per row and disk use per day (docs/history.md).
 bench-history:
 	$(CARGO) bench --locked --bench history
+# 50 simulated boxes publishing activity JSON at 1 Hz for 60 s through one local mosquitto, one
+# subscriber: messages/s, lost, broker CPU, end-to-end latency (docs/mqtt.md).
+bench-mqtt: setup
+	$(CARGO) bench --locked --bench mqtt_fleet
 bench-infer: setup
 	$(CARGO) bench --locked --bench infer
 # Issue 5's anchor models (YOLO11n) timed beside the bundled int8 files: this machine against the
