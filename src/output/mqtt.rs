@@ -645,10 +645,13 @@ fn closing(inner: &Inner, shared: &Shared, stop_seen: &mut Option<Instant>) -> b
     inner.closed.load(Ordering::SeqCst) || stop_seen.is_some_and(|t| t.elapsed() > STOP_FLUSH)
 }
 
-/// Sleeps `d`, returning early (true) when the thread should finish.
-async fn pause(d: Duration, inner: &Inner, shared: &Shared, stop_seen: &mut Option<Instant>) -> bool {
+/// Sleeps `d` (keeping the queue counters of the health fresh), returning early (true) when the
+/// thread should finish.
+async fn pause(d: Duration, inner: &Inner, books: &Books, stop_seen: &mut Option<Instant>) -> bool {
+    let shared = &*books.shared;
     let end = tokio::time::Instant::now() + d;
     while tokio::time::Instant::now() < end {
+        books.sync(inner);
         if closing(inner, shared, stop_seen) || shared.stopping() {
             return true;
         }
@@ -683,7 +686,17 @@ async fn run(s: Settings, inner: Arc<Inner>, shared: Arc<Shared>) {
                         h.mqtt.reconnects += 1;
                     }
                 });
-                shared.log(Level::INFO, format!("mqtt: connected to {} as {}", s.broker, s.box_id));
+                let (queued, dropped) = {
+                    let q = inner.queue();
+                    (q.len(), q.dropped)
+                };
+                shared.log(
+                    Level::INFO,
+                    format!(
+                        "mqtt: connected to {} as {}; {queued} queued messages to deliver, {dropped} dropped so far",
+                        s.broker, s.box_id
+                    ),
+                );
                 books.last_logged = None;
                 connected_before = true;
                 let end = session(&s, &inner, &shared, &books, client, eventloop, &mut stop_seen).await;
@@ -717,7 +730,7 @@ async fn run(s: Settings, inner: Arc<Inner>, shared: Arc<Shared>) {
             }
         };
         books.problem(&msg, delay);
-        if pause(delay, &inner, &shared, &mut stop_seen).await {
+        if pause(delay, &inner, &books, &mut stop_seen).await {
             books.sync(&inner);
             return;
         }
