@@ -554,6 +554,26 @@ mod tests {
     }
 
     #[test]
+    fn mqtt_shows_link_queue_drops_and_last_publish() {
+        let out = run(b"mqtt\r\nmqtt now\r\n");
+        assert!(out.contains("mqtt disabled (output.mqtt.enabled = false)\r\nOK"), "{out}");
+        assert!(out.contains("ERR `mqtt` takes no argument"), "{out}");
+        let m = crate::status::MqttHealth {
+            link: crate::status::MqttLink::Connected,
+            broker: "broker.farm:1883".into(),
+            queued: 3,
+            dropped: 7,
+            last_publish_unix_ms: Some(4_102_444_800_000),
+            ..Default::default()
+        };
+        let t = mqtt_text(&m, 4_102_444_802_500);
+        for want in ["link connected", "queued 3", "dropped 7", "last-publish 2100-01-01T00:00:00.000Z (2.5 s ago)"] {
+            assert!(t.contains(want), "{want}: {t}");
+        }
+        assert!(run(b"help\r\n").contains("mqtt "), "in help");
+    }
+
+    #[test]
     fn commands_case_insensitive() {
         let out = run(b"HeLp\r\nVERSION\n");
         assert!(out.contains("stream on|off"));

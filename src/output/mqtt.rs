@@ -529,7 +529,17 @@ fn classify(e: &ConnectionError) -> Failure {
         ConnectionError::Io(io) if io.kind() == std::io::ErrorKind::InvalidData => {
             Failure::Refused(format!("TLS: {io}"))
         }
-        other => Failure::Network(other.to_string()),
+        other => {
+            // TLS 1.3 rejects a missing or bad client certificate with an alert after the
+            // handshake, so it arrives as a read error of the first MQTT packet.
+            let text = other.to_string();
+            let lower = text.to_ascii_lowercase();
+            if lower.contains("fatal alert") || lower.contains("certificate") {
+                Failure::Refused(format!("TLS: {text}"))
+            } else {
+                Failure::Network(text)
+            }
+        }
     }
 }
 
