@@ -4,7 +4,8 @@
 //! recording; the retained "online"; the Last Will after SIGKILL; a 10 s broker outage (queue
 //! delivered after the reconnect, the rest dropped and counted, the Modbus heartbeat never stalls,
 //! "offline" on a clean stop); a wrong password (status bit 9, one log line, backoff, recovery once
-//! the password file is fixed); TLS with a CA made at test time.
+//! the password file is fixed); TLS with a CA made at test time, a broker that requires a client
+//! certificate, and a broker certificate from another CA (status bit 9).
 //!
 //! Mosquitto comes from Debian's package (`make setup`); without it these tests fail, naming it.
 
