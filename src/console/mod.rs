@@ -308,6 +308,10 @@ last {}",
                     if c.source == crate::pipeline::ScaleSource::Fish {
                         let _ = write!(body, " ({} fish)", c.fish_rulers);
                     }
+                    if c.ruler_length_m > 0.0 {
+                        let how = if c.ruler_length_learned { "measured on the references" } else { "configured" };
+                        let _ = write!(body, "\nfish-length {:.3} m ({how})", c.ruler_length_m);
+                    }
                 } else {
                     let _ = write!(body, "not calibrated (references-visible {})", c.references_visible);
                 }
@@ -652,6 +656,7 @@ record
                 status: 1,
                 fault: 0,
                 feeding: true,
+                scale: crate::pipeline::ScaleSource::References,
             };
             w.write(&r).expect("write");
         }

@@ -152,12 +152,12 @@ impl Publisher {
             ModbusMode::TcpClient | ModbusMode::RtuClient => bank.client_link_ok(),
         };
         let ack = bank.writable()[usize::from(registers::HR_FEEDING_ACK - registers::HR_WRITABLE_START)];
-        let inp = shared.with_health(|h| {
+        let (inp, scale) = shared.with_health(|h| {
             let inp = self.inputs(h, link, ack, now, stopped);
             h.fault = inp.fault;
             h.feeding = inp.feeding;
             h.updates += 1;
-            inp
+            (inp, h.calib.source)
         });
         bank.publish(registers::encode(&inp, self.order));
         if let Some(h) = &self.history {
@@ -171,6 +171,7 @@ impl Publisher {
                 status: inp.status,
                 fault: inp.fault as u16,
                 feeding: inp.feeding,
+                scale,
             });
         }
         self.last_publish = Some(now);
