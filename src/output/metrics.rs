@@ -6,8 +6,9 @@
 //! of metric families is one function, [`families`]: a new family is one call there (and one row in
 //! `docs/metrics.md`).
 //!
-//! A hostile LAN is expected: at most [`MAX_CONNECTIONS`] connections at once (more are closed at
-//! accept and counted), `allow` filters peers, a request head over [`MAX_HEAD`] bytes is answered
+//! A hostile LAN is expected: at most [`MAX_CONNECTIONS`] connections at once and
+//! [`MAX_PER_PEER`] from one address (more are closed at accept and counted, so one host holding
+//! connections open cannot lock out the Prometheus server), `allow` filters peers, a request head over [`MAX_HEAD`] bytes is answered
 //! 431, a request not complete within [`REQUEST_TIMEOUT`] 408, an answer not read within
 //! [`WRITE_TIMEOUT`] ends the connection; one request per connection (`Connection: close`). Nothing
 //! on these paths panics on outside input; should a connection task panic anyway, it ends alone.
@@ -24,16 +25,19 @@ use crate::backoff::Backoff;
 use crate::config::MetricsConfig;
 use crate::config::allow::AllowList;
 use crate::status::{Health, MetricsStatus, Shared};
+use std::collections::HashMap;
 use std::fmt::Write as _;
-use std::net::SocketAddr;
-use std::sync::Arc;
+use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
 use tracing::Level;
 
 /// Connections served at once; one more is closed at accept (counted).
 pub const MAX_CONNECTIONS: usize = 8;
+/// Connections served at once from one IP address; one more from it is closed at accept (counted).
+pub const MAX_PER_PEER: usize = 4;
 /// Largest request head (request line and headers), bytes; a longer one is answered 431.
 pub const MAX_HEAD: usize = 8 * 1024;
 /// A request head not complete within this is answered 408.
@@ -443,7 +447,7 @@ pub fn families(s: &Snapshot, e: &mut Exposition) {
     e.counter_by("fme_metrics_http_responses_total", "Responses of this endpoint by status code.", "code", &by_code);
     e.counter(
         "fme_metrics_connections_refused_total",
-        "Connections to this endpoint closed at accept (connection limit, output.metrics.allow).",
+        "Connections to this endpoint closed at accept (connection limits, output.metrics.allow).",
         *refused,
     );
     e.counter(
@@ -584,7 +588,43 @@ struct Ctx {
     stale_after: Duration,
 }
 
-async fn serve_connection(mut stream: tokio::net::TcpStream, ctx: Ctx) {
+/// Connections open per peer address.
+type PeerCounts = Arc<Mutex<HashMap<IpAddr, usize>>>;
+
+/// One connection's place in [`PeerCounts`], given back when its task ends (also by a panic or an
+/// abort).
+#[derive(Debug)]
+struct PeerSlot {
+    peers: PeerCounts,
+    ip: IpAddr,
+}
+
+impl PeerSlot {
+    /// Takes a place for `ip`, unless it already holds [`MAX_PER_PEER`].
+    fn take(peers: &PeerCounts, ip: IpAddr) -> Option<Self> {
+        let mut m = peers.lock().unwrap_or_else(|p| p.into_inner());
+        let n = m.entry(ip).or_insert(0);
+        if *n >= MAX_PER_PEER {
+            return None;
+        }
+        *n += 1;
+        Some(Self { peers: peers.clone(), ip })
+    }
+}
+
+impl Drop for PeerSlot {
+    fn drop(&mut self) {
+        let mut m = self.peers.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(n) = m.get_mut(&self.ip) {
+            *n = n.saturating_sub(1);
+            if *n == 0 {
+                m.remove(&self.ip);
+            }
+        }
+    }
+}
+
+async fn serve_connection(mut stream: tokio::net::TcpStream, ctx: Ctx, _slot: PeerSlot) {
     let mut buf = Box::new([0u8; MAX_HEAD]);
     let deadline = tokio::time::Instant::now() + REQUEST_TIMEOUT;
     let head = tokio::time::timeout_at(deadline, read_head(&mut stream, &mut buf)).await;
@@ -700,6 +740,7 @@ async fn serve(
     shutdown: impl std::future::Future<Output = ()>,
 ) {
     let mut tasks = tokio::task::JoinSet::new();
+    let peers = PeerCounts::default();
     let mut shutdown = std::pin::pin!(shutdown);
     let mut backoff = Backoff::new(Duration::from_millis(100), Duration::from_secs(5));
     let mut refused_log = LogThrottle::new(LOG_PERIOD);
@@ -723,18 +764,26 @@ async fn serve(
                     while let Some(done) = tasks.try_join_next() {
                         note_done(done, &mut panic_log);
                     }
-                    let full = tasks.len() >= MAX_CONNECTIONS;
-                    if full || !allow.permits(peer.ip()) {
-                        ctx.shared.metrics.refused.fetch_add(1, Ordering::Relaxed);
-                        if let Some(n) = refused_log.allow(tokio::time::Instant::now()) {
-                            let why = if full { "connection limit reached" } else { "not in output.metrics.allow" };
-                            tracing::warn!("metrics: connection from {peer} refused ({why}; {n} more since the last message)");
+                    let admitted = if !allow.permits(peer.ip()) {
+                        Err("not in output.metrics.allow")
+                    } else if tasks.len() >= MAX_CONNECTIONS {
+                        Err("connection limit reached")
+                    } else {
+                        PeerSlot::take(&peers, peer.ip()).ok_or("per-address limit reached")
+                    };
+                    match admitted {
+                        Ok(slot) => {
+                            let _ = stream.set_nodelay(true);
+                            tasks.spawn(serve_connection(stream, ctx.clone(), slot));
                         }
-                        drop(stream);
-                        continue;
+                        Err(why) => {
+                            ctx.shared.metrics.refused.fetch_add(1, Ordering::Relaxed);
+                            if let Some(n) = refused_log.allow(tokio::time::Instant::now()) {
+                                tracing::warn!("metrics: connection from {peer} refused ({why}; {n} more since the last message)");
+                            }
+                            drop(stream);
+                        }
                     }
-                    let _ = stream.set_nodelay(true);
-                    tasks.spawn(serve_connection(stream, ctx.clone()));
                 }
                 Err(e) => {
                     let pause = backoff.next_delay();
@@ -958,6 +1007,78 @@ mod tests {
         assert_eq!(read_head(&mut big.as_slice(), &mut buf).await, Head::TooLarge);
         assert_eq!(read_head(&mut &b"GET /metrics HTTP/1.1\r\n"[..], &mut buf).await, Head::Closed);
         assert_eq!(read_head(&mut &b"GET /metrics HTTP/1.1\r\n\r\n"[..], &mut buf).await, Head::Complete(25));
+    }
+
+    /// Connects from `ip` (any 127/8 address reaches a loopback listener on Linux).
+    async fn connect_from(ip: [u8; 4], to: SocketAddr) -> tokio::net::TcpStream {
+        let sock = tokio::net::TcpSocket::new_v4().expect("socket");
+        sock.bind(SocketAddr::from((ip, 0))).expect("bind source");
+        sock.connect(to).await.expect("connect")
+    }
+
+    /// Whether the server closes `s` without an answer (after a complete request).
+    async fn closed_unanswered(mut s: tokio::net::TcpStream) -> bool {
+        let _ = s.write_all(b"GET /metrics HTTP/1.1\r\n\r\n").await;
+        let mut buf = Vec::new();
+        let r = tokio::time::timeout(Duration::from_secs(5), s.read_to_end(&mut buf)).await;
+        matches!(r, Ok(Ok(0)) | Ok(Err(_)))
+    }
+
+    #[tokio::test]
+    async fn connection_limits_per_peer_and_in_all() {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let addr = listener.local_addr().expect("addr");
+        let shared = Arc::new(Shared::new(String::new(), 16));
+        let ctx =
+            Ctx { shared: shared.clone(), bank: Arc::new(RegisterBank::new()), stale_after: Duration::from_secs(5) };
+        let (stop, rx) = tokio::sync::oneshot::channel::<()>();
+        let server = tokio::spawn(serve(listener, AllowList::default(), ctx, async move {
+            let _ = rx.await;
+        }));
+        // One address: MAX_PER_PEER held open, the next one from it is refused.
+        let mut held = Vec::new();
+        for _ in 0..MAX_PER_PEER {
+            held.push(connect_from([127, 0, 0, 1], addr).await);
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        assert!(closed_unanswered(connect_from([127, 0, 0, 1], addr).await).await, "per-address limit");
+        // Another address still gets in, up to the total.
+        for _ in 0..MAX_CONNECTIONS - MAX_PER_PEER {
+            held.push(connect_from([127, 0, 0, 2], addr).await);
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        assert!(closed_unanswered(connect_from([127, 0, 0, 3], addr).await).await, "total limit");
+        assert_eq!(shared.metrics.refused.load(Ordering::Relaxed), 2);
+        // Freed slots serve again.
+        drop(held);
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        let mut s = connect_from([127, 0, 0, 3], addr).await;
+        s.write_all(b"GET /metrics HTTP/1.1\r\n\r\n").await.expect("write");
+        let mut buf = Vec::new();
+        let _ = tokio::time::timeout(Duration::from_secs(5), s.read_to_end(&mut buf)).await;
+        assert!(buf.starts_with(b"HTTP/1.1 200 OK\r\n"), "{}", String::from_utf8_lossy(&buf));
+        assert_eq!(shared.metrics.aborted.load(Ordering::Relaxed), 8, "the held connections");
+        let _ = stop.send(());
+        let _ = server.await;
+    }
+
+    #[tokio::test]
+    async fn allow_list_refuses_others() {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let addr = listener.local_addr().expect("addr");
+        let shared = Arc::new(Shared::new(String::new(), 16));
+        let ctx =
+            Ctx { shared: shared.clone(), bank: Arc::new(RegisterBank::new()), stale_after: Duration::from_secs(5) };
+        let allow = AllowList::parse(&["127.0.0.2".into()]).expect("allow");
+        let (stop, rx) = tokio::sync::oneshot::channel::<()>();
+        let server = tokio::spawn(serve(listener, allow, ctx, async move {
+            let _ = rx.await;
+        }));
+        assert!(closed_unanswered(connect_from([127, 0, 0, 1], addr).await).await);
+        assert!(!closed_unanswered(connect_from([127, 0, 0, 2], addr).await).await);
+        assert_eq!(shared.metrics.refused.load(Ordering::Relaxed), 1);
+        let _ = stop.send(());
+        let _ = server.await;
     }
 
     #[test]

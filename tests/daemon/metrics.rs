@@ -235,9 +235,9 @@ fn fme_run_serves_parseable_metrics_and_survives_hostile_requests() {
     let _ = slow.read_to_end(&mut raw);
     assert_eq!(parse_response(&raw).map(|r| r.0).ok(), Some(408), "{:?}", String::from_utf8_lossy(&raw));
 
-    // More connections than the endpoint serves at once: the extra one is closed unanswered.
+    // More connections from one address than the endpoint serves: the extra one is closed unanswered.
     std::thread::sleep(Duration::from_millis(300)); // the answered connections above finish
-    let idle: Vec<TcpStream> = (0..fme::output::metrics::MAX_CONNECTIONS)
+    let idle: Vec<TcpStream> = (0..fme::output::metrics::MAX_PER_PEER)
         .map(|_| TcpStream::connect(("127.0.0.1", port)).expect("connect"))
         .collect();
     std::thread::sleep(Duration::from_millis(200));
