@@ -52,7 +52,7 @@ pub const CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
 pub const LATENCY_BOUNDS_S: [f64; 9] = [0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 0.75, 1.0];
 
 /// The status bits of register 10 by name (the console's words), exported as `fme_status_bit`.
-pub const STATUS_BITS: [(u16, &str); 9] = [
+pub const STATUS_BITS: &[(u16, &str)] = &[
     (status::RUNNING, "running"),
     (status::CAMERA_OK, "camera-ok"),
     (status::DETECTOR_OK, "detector-ok"),
