@@ -294,6 +294,9 @@ async fn a_metrics_port_in_use_is_logged_and_the_daemon_runs_on() {
         "{:?}",
         shared.last_logs(50)
     );
+    let mut status = String::new();
+    fme::console::Session::default().command("status", &shared, daemon.bank(), &mut status);
+    assert!(status.contains("\r\nmetrics failed: cannot listen on"), "console status: {status}");
     // The rest runs: frames are processed and the registers update.
     let before = daemon.bank().block()[12];
     let end = Instant::now() + Duration::from_secs(10);
