@@ -226,6 +226,16 @@ impl Config {
         if let Err(e) = allow::AllowList::parse(&m.allow) {
             return err("output.modbus.allow", e);
         }
+        let mx = &self.output.metrics;
+        if !mx.listen.is_empty() && !is_host_port(&mx.listen) {
+            return err(
+                "output.metrics.listen",
+                format!("must be HOST:PORT (e.g. \"127.0.0.1:9464\") or empty (off), got {:?}", mx.listen),
+            );
+        }
+        if let Err(e) = allow::AllowList::parse(&mx.allow) {
+            return err("output.metrics.allow", e);
+        }
         if self.output.serial.baud == 0 {
             return err("output.serial.baud", "must be > 0");
         }

@@ -261,7 +261,7 @@ last {}",
                 let h = shared.health();
                 let _ = write!(
                     body,
-                    "state {}\nstatus 0x{:04x} {}\nfault {} ({})\nsource {}\nuptime {} s\nfeeding-recommended {}\nhistory {}",
+                    "state {}\nstatus 0x{:04x} {}\nfault {} ({})\nsource {}\nuptime {} s\nfeeding-recommended {}\nhistory {}\nmetrics {}",
                     if shared.stopping() { "stopping" } else { "running" },
                     r[10],
                     status_words(r[10]),
@@ -270,7 +270,8 @@ last {}",
                     h.source,
                     h.started.elapsed().as_secs(),
                     r[17],
-                    shared.history.describe()
+                    shared.history.describe(),
+                    shared.metrics.describe()
                 );
                 Ok(())
             }
