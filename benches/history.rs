@@ -20,6 +20,7 @@ fn row(i: i64) -> Row {
         status: 15,
         fault: 0,
         feeding: v > 0.25,
+        scale: fme::pipeline::ScaleSource::Fish,
     }
 }
 

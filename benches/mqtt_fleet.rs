@@ -136,6 +136,7 @@ fn main() {
                         status: 0b1111,
                         fault: 0,
                         feeding: false,
+                        scale: fme::pipeline::ScaleSource::References,
                     };
                     json.clear();
                     fme::output::mqtt::activity_json(&id, seq, &row, &mut json);

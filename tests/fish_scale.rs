@@ -78,6 +78,47 @@ fn auto_turns_to_the_fish_when_the_references_are_hidden() {
 }
 
 #[test]
+fn auto_carries_the_references_scale_over_to_the_fish() {
+    // While the references set the scale, `auto` measures the fish's length under their fit
+    // (`depth.learn_fish_length`); when 8 of 10 are hidden, the fish fit goes on with that length, so
+    // a configured length 10 % long costs (almost) nothing. Without the measured length it costs 10 %.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("f");
+    let scene = SynthConfig {
+        preset: Preset::Swarm,
+        fish: 20,
+        frames: 300,
+        seed: 32,
+        width: 320,
+        height: 192,
+        layout: Layout::F,
+        cohort: Cohort { mean_length_m: 0.35, length_cv: 0.1 },
+        ..SynthConfig::default()
+    };
+    generate(&scene, &out, false, &|_| {}).unwrap();
+    let seq = Sequence::open(&out).unwrap();
+    let mut cfg = Config::default();
+    cfg.motion.body_length_m = Metres(0.385);
+    let clean = evaluate(&seq, &cfg, &opts()).unwrap();
+    assert_eq!(clean.scale_source, "references");
+    let hidden = EvalOptions { hide_refs: Some((8, 5.0)), ..opts() };
+    let learned = evaluate(&seq, &cfg, &hidden).unwrap();
+    assert_eq!(learned.scale_source, "fish");
+    let mut fixed = cfg.clone();
+    fixed.depth.learn_fish_length = false;
+    let configured = evaluate(&seq, &fixed, &hidden).unwrap();
+    assert_eq!(configured.scale_source, "fish");
+    let shift = |r: &fme::eval::EvalReport| r.mean_est_mps / clean.mean_est_mps - 1.0;
+    assert!(shift(&learned).abs() < 0.03, "learned: {:+.3}", shift(&learned));
+    assert!(
+        shift(&configured) > shift(&learned) + 0.02,
+        "configured {:+.3}, learned {:+.3}",
+        shift(&configured),
+        shift(&learned)
+    );
+}
+
+#[test]
 fn the_scale_keys_validate() {
     let mut c = Config::default();
     assert_eq!(c.depth.scale, DepthScale::Auto);
@@ -95,4 +136,14 @@ fn the_scale_keys_validate() {
     std::fs::write(&p, text).unwrap();
     let e = Config::load_with(Some(&p), &[]).unwrap_err().to_string();
     assert!(e.contains("scale"), "{e}");
+}
+
+#[test]
+fn eval_names_a_bad_refs_at_option() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_fme"))
+        .args(["eval", "--sequence", concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/swarm20"), "--move-refs", "8"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--move-refs \"8\": expected N@T"), "{out:?}");
 }

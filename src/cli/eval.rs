@@ -100,6 +100,11 @@ pub struct EvalArgs {
     /// over or out of sight; the depth fit no longer sees them).
     #[arg(long, value_name = "N@T")]
     pub hide_refs: Option<String>,
+    /// Make the recorded positions of reference objects wrong from a time on: `N@T` moves the first
+    /// N from T seconds (each one's depth off by its own factor, 0.7-1.3: moved with the net, or
+    /// fouled), so the references' fit goes bad rather than short of references.
+    #[arg(long, value_name = "N@T")]
+    pub move_refs: Option<String>,
     /// relative-gt: per-pixel multiplicative noise on the inverse depth (standard deviation).
     #[arg(long, default_value_t = 0.01)]
     pub rel_noise: f64,
@@ -245,11 +250,16 @@ fn rate(hz: f64) -> String {
     if hz > 0.0 { format!("{hz}") } else { "every frame".into() }
 }
 
-/// Parses `N@T` of `--hide-refs`.
-fn parse_hide_refs(text: &str) -> Option<(usize, f64)> {
-    let (n, t) = text.split_once('@')?;
-    let (n, t) = (n.trim().parse().ok()?, t.trim().parse::<f64>().ok()?);
-    (t.is_finite() && t >= 0.0).then_some((n, t))
+/// Parses `N@T` of `--hide-refs` and `--move-refs`; the error names the option.
+fn parse_refs_at(option: &str, text: Option<&String>) -> Result<Option<(usize, f64)>, UsageError> {
+    let Some(text) = text else { return Ok(None) };
+    let parsed = text.split_once('@').and_then(|(n, t)| {
+        let (n, t) = (n.trim().parse().ok()?, t.trim().parse::<f64>().ok()?);
+        (t.is_finite() && t >= 0.0).then_some((n, t))
+    });
+    parsed
+        .map(Some)
+        .ok_or_else(|| UsageError(format!("{option} {text:?}: expected N@T (e.g. 8@5: eight references from 5 s)")))
 }
 
 /// Runs `fme eval`.
@@ -266,12 +276,8 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         foul_refs: args.foul_refs,
         track_rows: args.tracks.is_some(),
         no_calibration: args.no_calibration,
-        hide_refs: match &args.hide_refs {
-            None => None,
-            Some(text) => Some(parse_hide_refs(text).ok_or_else(|| {
-                super::UsageError(format!("--hide-refs {text:?}: expected N@T (e.g. 8@5: eight references from 5 s)"))
-            })?),
-        },
+        hide_refs: parse_refs_at("--hide-refs", args.hide_refs.as_ref())?,
+        move_refs: parse_refs_at("--move-refs", args.move_refs.as_ref())?,
         ..Default::default()
     };
     opts.relative.pixel_noise = args.rel_noise;

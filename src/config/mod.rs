@@ -265,6 +265,16 @@ impl Config {
         if !q.password_file.as_os_str().is_empty() && q.username.is_empty() {
             return err("output.mqtt.username", "must be set when output.mqtt.password_file is set");
         }
+        let mx = &self.output.metrics;
+        if !mx.listen.is_empty() && !is_host_port(&mx.listen) {
+            return err(
+                "output.metrics.listen",
+                format!("must be HOST:PORT (e.g. \"127.0.0.1:9464\") or empty (off), got {:?}", mx.listen),
+            );
+        }
+        if let Err(e) = allow::AllowList::parse(&mx.allow) {
+            return err("output.metrics.allow", e);
+        }
         if self.output.serial.baud == 0 {
             return err("output.serial.baud", "must be > 0");
         }

@@ -109,7 +109,8 @@ impl Default for SourceConfig {
     }
 }
 
-/// `[output]`: update rate and staleness, plus `[output.modbus]` and `[output.serial]`.
+/// `[output]`: update rate and staleness, plus `[output.modbus]`, `[output.serial]` and
+/// `[output.metrics]`.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct OutputConfig {
@@ -123,6 +124,8 @@ pub struct OutputConfig {
     pub serial: SerialLineConfig,
     /// `[output.mqtt]`: fleet telemetry to an MQTT broker (docs/mqtt.md).
     pub mqtt: MqttConfig,
+    /// `[output.metrics]`: the Prometheus endpoint (`docs/metrics.md`).
+    pub metrics: MetricsConfig,
 }
 
 impl Default for OutputConfig {
@@ -133,6 +136,7 @@ impl Default for OutputConfig {
             modbus: ModbusConfig::default(),
             serial: SerialLineConfig::default(),
             mqtt: MqttConfig::default(),
+            metrics: MetricsConfig::default(),
         }
     }
 }
@@ -320,6 +324,17 @@ impl Default for SerialLineConfig {
     fn default() -> Self {
         Self { enabled: false, device: "/dev/ttyUSB1".into(), baud: 9600 }
     }
+}
+
+/// `[output.metrics]`: a Prometheus endpoint (`GET /metrics`, text format 0.0.4; `docs/metrics.md`).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct MetricsConfig {
+    /// Address to serve on, HOST:PORT (e.g. `"127.0.0.1:9464"`); empty = off (default).
+    pub listen: String,
+    /// Addresses or CIDR ranges allowed to connect (`["192.168.1.0/24"]`); empty = everyone. Others
+    /// are closed at accept and counted.
+    pub allow: Vec<String>,
 }
 
 /// `[console]`.

@@ -292,7 +292,7 @@ last {}",
                 let h = shared.health();
                 let _ = write!(
                     body,
-                    "state {}\nstatus 0x{:04x} {}\nfault {} ({})\nsource {}\nuptime {} s\nfeeding-recommended {}\nhistory {}",
+                    "state {}\nstatus 0x{:04x} {}\nfault {} ({})\nsource {}\nuptime {} s\nfeeding-recommended {}\nhistory {}\nmetrics {}",
                     if shared.stopping() { "stopping" } else { "running" },
                     r[10],
                     status_words(r[10]),
@@ -301,7 +301,8 @@ last {}",
                     h.source,
                     h.started.elapsed().as_secs(),
                     r[17],
-                    shared.history.describe()
+                    shared.history.describe(),
+                    shared.metrics.describe()
                 );
                 Ok(())
             }
@@ -338,6 +339,10 @@ last {}",
                     );
                     if c.source == crate::pipeline::ScaleSource::Fish {
                         let _ = write!(body, " ({} fish)", c.fish_rulers);
+                    }
+                    if c.ruler_length_m > 0.0 {
+                        let how = if c.ruler_length_learned { "measured on the references" } else { "configured" };
+                        let _ = write!(body, "\nfish-length {:.3} m ({how})", c.ruler_length_m);
                     }
                 } else {
                     let _ = write!(body, "not calibrated (references-visible {})", c.references_visible);
@@ -708,6 +713,7 @@ record
                 status: 1,
                 fault: 0,
                 feeding: true,
+                scale: crate::pipeline::ScaleSource::References,
             };
             w.write(&r).expect("write");
         }

@@ -56,6 +56,9 @@ pub struct EvalOptions {
     pub no_calibration: bool,
     /// Hide the first N reference objects from T seconds on (`--hide-refs N@T`).
     pub hide_refs: Option<(usize, f64)>,
+    /// Make the recorded positions of the first N reference objects wrong from T seconds on
+    /// (`--move-refs N@T`).
+    pub move_refs: Option<(usize, f64)>,
 }
 
 impl Default for EvalOptions {
@@ -69,6 +72,7 @@ impl Default for EvalOptions {
             track_rows: false,
             no_calibration: false,
             hide_refs: None,
+            move_refs: None,
         }
     }
 }
@@ -349,7 +353,7 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
             }
         }
     }
-    let mut hide = opts.hide_refs;
+    let (mut hide, mut misplace) = (opts.hide_refs, opts.move_refs);
     // Camera z of each fish's body centre by (frame, id): ground-truth boxes carry world.csv's ids.
     let body_z: HashMap<(u32, u32), f64> = if estimated && opts.boxes == BoxesChoice::Gt {
         seq.world.iter().map(|r| ((r.frame, r.id), seq.camera.pose.to_camera(&r.position).depth().0)).collect()
@@ -381,6 +385,12 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         {
             pipeline.hide_references(n);
             hide = None;
+        }
+        if let Some((n, t_move)) = misplace
+            && frame_data.timestamp.0 >= t_move
+        {
+            pipeline.misplace_references(n);
+            misplace = None;
         }
         let cpu0 = process_cpu_s();
         let sample = pipeline

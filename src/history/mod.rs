@@ -17,6 +17,7 @@
 
 pub mod plot;
 
+use crate::pipeline::ScaleSource;
 use crate::status::{HistoryStatus, Shared};
 use std::fmt::Write as _;
 use std::fs::{File, OpenOptions};
@@ -30,7 +31,10 @@ use std::time::{Duration, Instant};
 use tracing::Level;
 
 /// First line of every day file.
-pub const HEADER: &str = "time_utc,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,status,fault,feeding";
+pub const HEADER: &str = "time_utc,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,status,fault,feeding,scale";
+/// First line of day files written before the `scale` column: still read, and rows without the
+/// column read as scale `none` (a day file begun before an upgrade is continued with the new rows).
+pub const HEADER_WITHOUT_SCALE: &str = "time_utc,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,status,fault,feeding";
 /// Rows held between the publisher and the writer thread; when full, rows are dropped and counted.
 pub const QUEUE_ROWS: usize = 256;
 /// After a write error (disk full, read-only), the history pauses this long before trying again.
@@ -58,6 +62,8 @@ pub struct Row {
     pub fault: u16,
     /// Feeding recommended.
     pub feeding: bool,
+    /// What set the metric scale (`depth.scale`; status bit 8).
+    pub scale: ScaleSource,
 }
 
 use crate::civil::{civil_from_days, days_from_civil};
@@ -142,14 +148,14 @@ pub fn format_row(r: &Row, out: &mut String) {
     push_num(out, r.ci95_mps, 4);
     let _ = write!(out, ",{},", r.n_fish);
     push_num(out, r.bls, 3);
-    let _ = writeln!(out, ",{},{},{}", r.status, r.fault, u8::from(r.feeding));
+    let _ = writeln!(out, ",{},{},{},{}", r.status, r.fault, u8::from(r.feeding), r.scale.name());
 }
 
 /// Parses one line (without its `\n`) written by [`format_row`].
 pub fn parse_row(line: &str) -> Result<Row, String> {
     let f: Vec<&str> = line.split(',').collect();
-    if f.len() != 9 {
-        return Err(format!("expected 9 fields ({HEADER}), got {}", f.len()));
+    if f.len() != 10 && f.len() != 9 {
+        return Err(format!("expected 10 fields ({HEADER}), got {}", f.len()));
     }
     let num = |i: usize, name: &str| -> Result<f64, String> {
         if f[i].is_empty() {
@@ -176,6 +182,10 @@ pub fn parse_row(line: &str) -> Result<Row, String> {
             "0" => false,
             "1" => true,
             o => return Err(format!("feeding: must be 0 or 1, got {o:?}")),
+        },
+        scale: match f.get(9) {
+            None => ScaleSource::None,
+            Some(v) => ScaleSource::parse(v).ok_or_else(|| format!("scale: references, fish or none, got {v:?}"))?,
         },
     })
 }
@@ -221,7 +231,7 @@ pub fn read_day_file(path: &Path) -> Result<DayFile, HistoryError> {
     let bad = |line: usize, message: String| HistoryError::Line { path: path.to_path_buf(), line, message };
     for (i, raw) in bytes[..complete].split(|&b| b == b'\n').enumerate() {
         if i == 0 && complete > 0 {
-            if raw != HEADER.as_bytes() {
+            if raw != HEADER.as_bytes() && raw != HEADER_WITHOUT_SCALE.as_bytes() {
                 return Err(bad(1, format!("not a history file: the first line must be `{HEADER}`")));
             }
             continue;
@@ -635,6 +645,7 @@ mod tests {
             status: 0x4b,
             fault: 0,
             feeding: v > 0.2,
+            scale: ScaleSource::References,
         }
     }
 
@@ -667,6 +678,27 @@ mod tests {
         assert!(parse_row(line.trim_end()).expect("parses").activity_mps.is_nan(), "{line}");
         assert!(parse_row("2126-12-04T16:14:34.123Z,0.1").is_err());
         assert!(parse_row("2126-12-04T16:14:34.123Z,x,,,1,,0,0,0").is_err());
+        // The scale column: round trip, a bad name, and rows written before it (9 fields).
+        for scale in [ScaleSource::References, ScaleSource::Fish, ScaleSource::None] {
+            line.clear();
+            format_row(&Row { scale, ..r }, &mut line);
+            assert_eq!(parse_row(line.trim_end()).expect("parses").scale, scale, "{line}");
+        }
+        let e = parse_row("2126-12-04T16:14:34.123Z,0.1,,,1,,0,0,0,ruler").unwrap_err();
+        assert!(e.starts_with("scale:"), "{e}");
+        let old = parse_row("2126-12-04T16:14:34.123Z,0.1,,,1,,0,0,0").expect("a row without the scale column");
+        assert_eq!(old.scale, ScaleSource::None);
+    }
+
+    #[test]
+    fn day_files_from_before_the_scale_column_are_read() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("2126-11-02.csv");
+        std::fs::write(&p, format!("{HEADER_WITHOUT_SCALE}\n2126-11-02T00:00:01.000Z,0.1,0.1,0.01,3,0.3,15,0,0\n"))
+            .expect("write");
+        let f = read_day_file(&p).expect("reads");
+        assert_eq!(f.rows.len(), 1);
+        assert_eq!(f.rows[0].scale, ScaleSource::None);
     }
 
     fn ms(y: i64, m: u32, d: u32, h: i64) -> i64 {

@@ -198,6 +198,7 @@ mod tests {
             status: 0,
             fault,
             feeding,
+            scale: crate::pipeline::ScaleSource::Fish,
         }
     }
 

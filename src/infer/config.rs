@@ -121,6 +121,9 @@ pub struct DepthConfig {
     /// What sets the metric scale: the reference objects, the fish (of length
     /// `motion.body_length_m`), or the references while they fit well and else the fish.
     pub scale: DepthScale,
+    /// With `scale = "auto"`: while the references set the scale, measure the fish's length under
+    /// their fit, and use it instead of `motion.body_length_m` when the fish take over.
+    pub learn_fish_length: bool,
     /// How a fish's depth is read from the map (see [`DepthSample`]).
     pub sample: DepthSample,
     /// Channel means (R, G, B) in 0..1 units, subtracted after `/255`. ImageNet by default; use
@@ -147,6 +150,7 @@ impl Default for DepthConfig {
             flip: false,
             fit: FitMethod::Robust,
             scale: DepthScale::Auto,
+            learn_fish_length: true,
             sample: DepthSample::Visible,
             mean: [0.485, 0.456, 0.406],
             std: [0.229, 0.224, 0.225],

@@ -38,6 +38,10 @@ pub const AUTO_MAX_RESIDUAL_M: f64 = 0.15;
 /// Fish rulers (plus references) a fit needs.
 pub const MIN_RULERS: usize = 3;
 
+/// Time constant of the averaging of the cohort's length measured under the references' fit
+/// ([`LengthLearner`]), s.
+pub const LEARNED_LENGTH_SMOOTHING_S: f64 = 10.0;
+
 /// Time constant of the smoothing of the fish fit's scale and shift, s (the fish in view change from
 /// frame to frame; the water and the camera do not).
 pub const FISH_FIT_SMOOTHING_S: f64 = 2.0;
@@ -127,33 +131,97 @@ impl Rulers {
         let _ = f.looks.push_back(Look { angle, relative, ray_norm: intrinsics.ray(centre).norm() });
     }
 
+    /// The broadside length of fish `id` under `fit`, m: the [`LENGTH_QUANTILE`] of its looks' angular
+    /// lengths times their fitted ranges; `None` before [`MIN_LOOKS`] looks.
+    pub fn broadside(&mut self, id: u32, fit: &DepthFit) -> Option<Metres> {
+        let f = self.fish.iter().find(|f| f.id == id)?;
+        if f.looks.len() < MIN_LOOKS {
+            return None;
+        }
+        self.scratch.clear();
+        self.scratch.extend(f.looks.iter().filter_map(|l| fit.depth(l.relative).map(|z| l.angle * z.0 * l.ray_norm)));
+        quantile(&mut self.scratch, LENGTH_QUANTILE).filter(|l| l.is_finite() && *l > 0.0).map(Metres)
+    }
+
     /// The pair of fish `id` for a fit, from its latest look, when it has at least [`MIN_LOOKS`]: with
     /// `fit` (the fit in use), its fitted depth now times `length` over its broadside length under
-    /// that fit; without, [`ruler_depth`] of the [`LENGTH_QUANTILE`] of its angular lengths.
+    /// that fit ([`Self::broadside`]); without, [`ruler_depth`] of the [`LENGTH_QUANTILE`] of its
+    /// angular lengths.
     pub fn pair(&mut self, id: u32, fit: Option<&DepthFit>, length: Metres) -> Option<ReferencePair> {
         let f = self.fish.iter().find(|f| f.id == id)?;
         if f.looks.len() < MIN_LOOKS {
             return None;
         }
         let now = *f.looks.back()?;
-        self.scratch.clear();
         match fit {
             Some(fit) => {
                 let z_now = fit.depth(now.relative)?.0;
-                self.scratch
-                    .extend(f.looks.iter().filter_map(|l| fit.depth(l.relative).map(|z| l.angle * z.0 * l.ray_norm)));
-                let l = quantile(&mut self.scratch, LENGTH_QUANTILE)?;
+                let l = self.broadside(id, fit)?.0;
                 let depth = z_now * length.0 / l;
                 (depth.is_finite() && depth > 0.0)
                     .then_some(ReferencePair { relative: now.relative, depth: Metres(depth) })
             }
             None => {
+                self.scratch.clear();
                 self.scratch.extend(f.looks.iter().map(|l| l.angle));
                 let a = quantile(&mut self.scratch, LENGTH_QUANTILE)?;
                 let z = length.0 / a / now.ray_norm;
                 (z.is_finite() && z > 0.0).then_some(ReferencePair { relative: now.relative, depth: Metres(z) })
             }
         }
+    }
+}
+
+/// The cohort's ruler length learned while the references set the scale (`depth.learn_fish_length`):
+/// the median of the fish's broadside lengths under the references' fit, averaged over time. When
+/// the references go, the fish fit uses it instead of `motion.body_length_m`, so the scale carries
+/// on where the references left it: a configured length that is off, or a length quantile that
+/// reads short, costs nothing while the references lasted.
+#[derive(Debug, Clone, Default)]
+pub struct LengthLearner {
+    last: Option<(f64, f64)>,
+    lengths: Vec<f64>,
+}
+
+impl LengthLearner {
+    /// A learner for up to `capacity` fish a frame (allocated once).
+    pub fn new(capacity: usize) -> Self {
+        Self { last: None, lengths: Vec::with_capacity(capacity) }
+    }
+
+    /// Adds the broadside length of one fish seen under the references' fit in this depth frame (a
+    /// full frame ignores more).
+    pub fn push(&mut self, length: Metres) {
+        if length.0.is_finite() && length.0 > 0.0 && self.lengths.len() < self.lengths.capacity() {
+            self.lengths.push(length.0);
+        }
+    }
+
+    /// Ends the depth frame at `t_s`: blends the median of its lengths into the running length; a
+    /// frame with fewer than [`MIN_RULERS`] fish is skipped.
+    pub fn commit(&mut self, t_s: f64) {
+        let m = if self.lengths.len() >= MIN_RULERS { quantile(&mut self.lengths, 0.5) } else { None };
+        self.lengths.clear();
+        let Some(m) = m else { return };
+        self.last = Some(match self.last {
+            // Time going backwards starts over.
+            Some((t0, prev)) if t_s >= t0 => {
+                let a = 1.0 - (-(t_s - t0) / LEARNED_LENGTH_SMOOTHING_S).exp();
+                (t_s, prev + a * (m - prev))
+            }
+            _ => (t_s, m),
+        });
+    }
+
+    /// The learned length, m; `None` before any.
+    pub fn length(&self) -> Option<Metres> {
+        self.last.map(|(_, l)| Metres(l))
+    }
+
+    /// Forgets it.
+    pub fn reset(&mut self) {
+        self.last = None;
+        self.lengths.clear();
     }
 }
 
@@ -234,6 +302,28 @@ mod tests {
             assert!((f.depth(r).unwrap().0 / d - 1.0).abs() < 0.05, "{d}: {f:?}");
         }
         assert!(matches!(fit_rulers(&pairs[..2], 0.1), Err(FitError::TooFewReferences { .. })));
+    }
+
+    #[test]
+    fn the_learner_takes_the_median_and_averages_over_time() {
+        let mut l = LengthLearner::new(8);
+        assert_eq!(l.length(), None);
+        // Too few fish: nothing learned.
+        let frame = |l: &mut LengthLearner, t: f64, v: &[f64]| {
+            v.iter().for_each(|x| l.push(Metres(*x)));
+            l.commit(t);
+        };
+        frame(&mut l, 0.0, &[0.3, 0.3]);
+        assert_eq!(l.length(), None);
+        // The median, not the mean: one wild fish does not move it.
+        frame(&mut l, 0.0, &[0.30, 0.32, 0.34, 3.0]);
+        let first = l.length().unwrap().0;
+        assert!((first - 0.32).abs() < 1e-12 || (first - 0.34).abs() < 1e-12, "{first}");
+        frame(&mut l, LEARNED_LENGTH_SMOOTHING_S, &[0.5, 0.5, 0.5]);
+        let want = first + (1.0 - (-1f64).exp()) * (0.5 - first);
+        assert!((l.length().unwrap().0 - want).abs() < 1e-12);
+        l.reset();
+        assert_eq!(l.length(), None);
     }
 
     #[test]

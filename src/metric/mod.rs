@@ -22,8 +22,8 @@ pub mod regressors;
 mod sample;
 
 pub use fish::{
-    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, FISH_FIT_SMOOTHING_S, FitSmoother, LOOKS, MIN_LOOKS, MIN_RULERS,
-    RULER_TIMEOUT_S, Rulers, fit_rulers, ruler_depth,
+    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, FISH_FIT_SMOOTHING_S, FitSmoother, LEARNED_LENGTH_SMOOTHING_S, LOOKS,
+    LengthLearner, MIN_LOOKS, MIN_RULERS, RULER_TIMEOUT_S, Rulers, fit_rulers, ruler_depth,
 };
 pub use fit::{DepthModel, FitError, ROBUST_INLIER, ReferencePair, References, ScaleShift, fit, fit_robust};
 pub use method::{DepthFit, DepthScale, FitMethod};

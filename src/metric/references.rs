@@ -44,6 +44,17 @@ impl ReferencePoints {
         self.points = keep;
     }
 
+    /// Makes the recorded depth of the first `n` references wrong from now on, each by its own
+    /// factor between 0.7 and 1.3 (deterministic): as if they moved with the net, or a fouled cube
+    /// were read where it no longer is. For testing the fits (`fme eval --move-refs`).
+    pub fn misplace_first(&mut self, n: usize) {
+        for (k, p) in self.points.iter_mut().take(n).enumerate() {
+            // Golden-ratio steps spread the factors over the range without repeating.
+            let u = ((k as f64 + 1.0) * 0.618_033_988_75).fract();
+            p.1 = Metres(p.1.0 * (0.7 + 0.6 * u));
+        }
+    }
+
     /// Pixel and true depth of each visible reference.
     pub fn iter(&self) -> impl Iterator<Item = (Pixel, Metres)> + '_ {
         self.points.iter().copied()
@@ -148,5 +159,20 @@ mod tests {
         assert!(f.covers(&crate::geometry::PixelBox::new(312.0, 184.0, 16.0, 16.0)), "the cube itself");
         assert!(!f.covers(&crate::geometry::PixelBox::new(270.0, 170.0, 100.0, 40.0)), "a near fish in front of it");
         assert!(!f.covers(&crate::geometry::PixelBox::new(100.0, 100.0, 16.0, 16.0)), "elsewhere");
+    }
+
+    #[test]
+    fn misplaced_references_are_each_off_by_their_own_factor() {
+        let camera = Camera {
+            intrinsics: Intrinsics::from_hfov(640, 384, 90.0).unwrap(),
+            pose: Pose::new(Matrix3::identity(), Vector3::zeros()).unwrap(),
+        };
+        let pts = (0..5).map(|i| WorldPoint::new(0.1 * f64::from(i), 0.0, 2.0));
+        let mut r = ReferencePoints::project(&camera, pts, 640, 384);
+        r.misplace_first(3);
+        let d: Vec<f64> = r.iter().map(|(_, d)| d.0 / 2.0).collect();
+        assert!(d[..3].iter().all(|k| (0.7..=1.3).contains(k) && (k - 1.0).abs() > 0.01), "{d:?}");
+        assert!(d[0] != d[1] && d[1] != d[2], "{d:?}");
+        assert_eq!(&d[3..], &[1.0, 1.0]);
     }
 }

@@ -1,5 +1,5 @@
 //! Outputs to the farm: register map, Modbus TCP/RTU server and client, serial line, feeding rule,
-//! MQTT telemetry ([`mqtt`], docs/mqtt.md).
+//! MQTT telemetry ([`mqtt`], docs/mqtt.md) and the Prometheus endpoint ([`metrics`]).
 //!
 //! The register map ([`registers`]) and the feeding rule ([`feeding`]) are pure and tested without
 //! I/O; [`modbus`] and the serial line are the I/O edges around the shared [`bank::RegisterBank`].
@@ -7,6 +7,7 @@
 pub mod bank;
 pub mod feeding;
 pub mod log_throttle;
+pub mod metrics;
 pub mod modbus;
 pub mod modbus_guard;
 pub mod mqtt;

@@ -416,10 +416,10 @@ pub struct MqttSender {
 }
 
 impl MqttSender {
-    /// Queues update `row` (made with scale source `scale`) and the events it makes.
-    pub fn send(&mut self, row: Row, scale: ScaleSource) {
+    /// Queues update `row` and the events it makes.
+    pub fn send(&mut self, row: Row) {
         self.seq += 1;
-        let events = self.events.update(&row, scale);
+        let events = self.events.update(&row, row.scale);
         let waited = !self.inner.link_up.load(Ordering::Relaxed);
         {
             let mut q = self.inner.queue();
@@ -922,6 +922,7 @@ mod tests {
             status: status::RUNNING | status::TELEMETRY_FAULT,
             fault,
             feeding,
+            scale: ScaleSource::References,
         }
     }
 

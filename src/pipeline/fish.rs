@@ -23,7 +23,7 @@ use crate::config::Config;
 use crate::geometry::{Camera, PixelBox};
 use crate::infer::{self, DepthNet, Detector, FramePlan, InferSchedule, RgbFrame};
 use crate::metric::{
-    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, DepthFit, DepthScale, FitSmoother, MapKind, ROBUST_INLIER,
+    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, DepthFit, DepthScale, FitSmoother, LengthLearner, MapKind, ROBUST_INLIER,
     ReferenceFootprints, ReferencePoints, References, Rulers, fit_rulers, sample_fish,
 };
 use crate::motion::heading::apparent_length;
@@ -63,6 +63,8 @@ pub struct FishPipeline {
     fish_fit: FitSmoother,
     /// The fish's looks for the fish fit.
     rulers: Rulers,
+    /// The cohort length measured under the references' fit (`depth.learn_fish_length`).
+    learned_length: LengthLearner,
     /// The estimator's tracks, copied for the fish fit (allocated once).
     views: Vec<TrackView>,
     calib: CalibInfo,
@@ -159,6 +161,7 @@ impl FishPipeline {
             fit_stats: FitStats::default(),
             fish_fit: FitSmoother::default(),
             rulers: Rulers::new(crate::motion::MAX_FISH),
+            learned_length: LengthLearner::new(crate::motion::MAX_FISH),
             views: Vec::with_capacity(crate::motion::MAX_FISH),
             rgb: Vec::with_capacity(cfg.source.width as usize * cfg.source.height as usize * 3),
             dets: Vec::with_capacity(track::MAX_DETS),
@@ -215,6 +218,12 @@ impl FishPipeline {
         self.refs.drop_first(n);
     }
 
+    /// Makes the recorded positions of the first `n` reference objects wrong from now on (moved with
+    /// the net, or fouled: `fme eval --move-refs`): each one's depth off by its own factor, 0.7-1.3.
+    pub fn misplace_references(&mut self, n: usize) {
+        self.refs.misplace_first(n);
+    }
+
     /// The depth map the pipeline samples now: the network's last map, or the substitute's.
     fn depth_view(&self) -> Option<&dyn DepthView> {
         depth_view(&self.depth, &self.substitute)
@@ -227,6 +236,7 @@ impl FishPipeline {
         self.estimator = ActivityEstimator::new(*self.estimator.camera(), self.cfg.motion, self.cfg.postprocess);
         self.schedule = InferSchedule::new(self.cfg.detector.rate_hz, self.cfg.depth.rate_hz);
         self.rulers.clear();
+        self.learned_length.reset();
     }
 
     /// Refits on the current depth map (eq. 1-2) as `depth.scale` says: on the references, or on the
@@ -300,13 +310,17 @@ impl FishPipeline {
             calibrated: true,
             source: ScaleSource::References,
             fish_rulers: 0,
+            ruler_length_m: self.learned_length.length().map_or(0.0, |l| l.0),
+            ruler_length_learned: self.learned_length.length().is_some(),
         };
     }
 
     /// The fish fit (docs/pipeline.md, "The fish as the ruler"): each confirmed fish seen in enough
-    /// depth frames is a reference at its depth scaled by `length` over its broadside length
-    /// ([`Rulers`]); `refs` (the visible references' pairs) are added. With `fit` false, only the
-    /// fish's looks are recorded.
+    /// depth frames is a reference at its depth scaled by the cohort's length over its broadside
+    /// length ([`Rulers`]); `refs` (the visible references' pairs) are added. The cohort's length is
+    /// `length`, or the one measured under the references' fit while they set the scale
+    /// (`depth.learn_fish_length`, [`LengthLearner`]). With `fit` false (the references set the scale),
+    /// the fish's looks are recorded and their length measured.
     fn fish_refit(&mut self, t_s: f64, length: crate::units::Metres, refs: References, fit: bool) {
         self.views.clear();
         self.views.extend(self.estimator.tracks());
@@ -316,6 +330,9 @@ impl FishPipeline {
         let mut pairs = refs.clone();
         let intrinsics = self.estimator.camera().intrinsics;
         let (how, views) = (self.cfg.depth.sample, &self.views);
+        let learn = !fit && self.cfg.depth.learn_fish_length;
+        let learned = self.learned_length.length().filter(|_| self.cfg.depth.learn_fish_length);
+        let length = learned.unwrap_or(length);
         let mut rulers = 0u32;
         for v in views {
             // Seen in the last frame.
@@ -331,6 +348,9 @@ impl FishPipeline {
             };
             let angle = apparent_length(&intrinsics, &v.bbox, crate::units::Metres(1.0)).0;
             self.rulers.look(t_s, v.id, &intrinsics, centre, angle, relative);
+            if learn && let Some(l) = self.fit.as_ref().and_then(|f| self.rulers.broadside(v.id, f)) {
+                self.learned_length.push(l);
+            }
             if !fit || pairs.is_full() {
                 continue;
             }
@@ -338,6 +358,9 @@ impl FishPipeline {
                 let _ = pairs.push(p);
                 rulers += 1;
             }
+        }
+        if learn {
+            self.learned_length.commit(t_s);
         }
         if !fit {
             return;
@@ -359,6 +382,8 @@ impl FishPipeline {
                     calibrated: true,
                     source: ScaleSource::Fish,
                     fish_rulers: rulers,
+                    ruler_length_m: length.0,
+                    ruler_length_learned: learned.is_some(),
                 };
             }
             Err(e) => {
@@ -538,6 +563,7 @@ impl Pipeline for FishPipeline {
                 depth_uncalibrated: !metric,
                 stale: false,
             },
+            scale: self.calib.source,
         }))
     }
 

@@ -57,6 +57,8 @@ pub struct ActivitySample {
     pub latency: Seconds,
     /// Quality flags.
     pub flags: QualityFlags,
+    /// What set the metric scale of this sample (status bit 8, the series' and history's `scale`).
+    pub scale: ScaleSource,
 }
 
 /// Health of the pipeline stages, published in the status register and the console.
@@ -91,6 +93,10 @@ pub struct CalibInfo {
     pub source: ScaleSource,
     /// Fish used as rulers in the last fish fit.
     pub fish_rulers: u32,
+    /// The cohort length the fish fit uses, m (0 before any fish fit).
+    pub ruler_length_m: f64,
+    /// That length was measured under the references' fit (`depth.learn_fish_length`), not configured.
+    pub ruler_length_learned: bool,
 }
 
 /// What set the metric scale of the fit in use (`depth.scale`; docs/pipeline.md).
@@ -113,6 +119,11 @@ impl ScaleSource {
             Self::References => "references",
             Self::Fish => "fish",
         }
+    }
+
+    /// The source named `name` (as [`Self::name`] writes it).
+    pub fn parse(name: &str) -> Option<Self> {
+        [Self::None, Self::References, Self::Fish].into_iter().find(|s| s.name() == name)
     }
 }
 

@@ -6,7 +6,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// The CSV header of [`SeriesWriter`].
-pub const HEADER: &str = "frame,t,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,latency_s,too_few_fish,uncalibrated";
+pub const HEADER: &str =
+    "frame,t,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,latency_s,too_few_fish,uncalibrated,scale";
 
 /// One row: the frame number (1-based, in delivery order) and the sample computed on it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,7 +61,7 @@ impl SeriesWriter {
         let s = &row.sample;
         writeln!(
             self.out,
-            "{},{},{},{},{},{},{},{},{},{}{extra}",
+            "{},{},{},{},{},{},{},{},{},{},{}{extra}",
             row.frame,
             s.timestamp.0,
             Field(opt(s.mean.0)),
@@ -70,7 +71,8 @@ impl SeriesWriter {
             Field(opt(s.mean_body_lengths)),
             s.latency.0,
             u8::from(s.flags.too_few_fish),
-            u8::from(s.flags.depth_uncalibrated)
+            u8::from(s.flags.depth_uncalibrated),
+            s.scale.name()
         )
         .map_err(|e| format!("{}: {e}", self.path.display()))
     }

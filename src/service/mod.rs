@@ -7,6 +7,7 @@
 //!     -> Shared health <- console thread, keepalive task, live view
 //!     -> HistorySender (bounded, drop and count) -> fme-history thread -> day files (docs/history.md)
 //!     -> MqttSender (bounded, drop oldest and count) -> fme-mqtt thread -> broker (docs/mqtt.md)
+//! Shared health + RegisterBank counters <- metrics task (GET /metrics, a copy per scrape; docs/metrics.md)
 //! ```
 //! The pipeline thread pings the systemd watchdog each loop turn (a stuck `Pipeline::process` stops
 //! the pings and systemd restarts the service); a camera outage does not (the loop keeps turning).
@@ -101,6 +102,7 @@ pub struct Daemon {
     server_stops: Vec<tokio::sync::oneshot::Sender<()>>,
     server_tasks: Vec<tokio::task::JoinHandle<()>>,
     client_task: Option<tokio::task::JoinHandle<()>>,
+    metrics: Option<crate::output::metrics::MetricsServer>,
     aux_tasks: Vec<tokio::task::JoinHandle<()>>,
     pipeline_thread: Option<std::thread::JoinHandle<()>>,
     other_threads: Vec<std::thread::JoinHandle<()>>,
@@ -110,7 +112,10 @@ pub struct Daemon {
 
 impl std::fmt::Debug for Daemon {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Daemon").field("modbus_addr", &self.modbus_addr).finish_non_exhaustive()
+        f.debug_struct("Daemon")
+            .field("modbus_addr", &self.modbus_addr)
+            .field("metrics_addr", &self.metrics_addr())
+            .finish_non_exhaustive()
     }
 }
 
@@ -443,6 +448,9 @@ impl Daemon {
         let (server_stops, server_tasks, client_task) = (roles.server_stops, roles.server_tasks, roles.client_task);
         let serial_tx = roles.serial_tx;
         other_threads.extend(roles.serial_thread);
+        // The Prometheus endpoint: a port it cannot bind is logged and shown, never fatal.
+        let stale_after = Duration::from_secs_f64(cfg.output.stale_after_s);
+        let metrics = crate::output::metrics::spawn(&cfg.output.metrics, stale_after, &shared, &bank).await;
         if cfg.console.enabled {
             let (dev, baud, echo, sh, bk) =
                 (cfg.console.device.clone(), cfg.console.baud, cfg.console.echo, shared.clone(), bank.clone());
@@ -562,6 +570,7 @@ impl Daemon {
             server_stops,
             server_tasks,
             client_task,
+            metrics,
             aux_tasks,
             pipeline_thread,
             other_threads,
@@ -598,6 +607,11 @@ impl Daemon {
     /// The bound Modbus TCP server address (useful with port 0).
     pub fn modbus_addr(&self) -> Option<SocketAddr> {
         self.modbus_addr
+    }
+
+    /// The bound address of the Prometheus endpoint (`output.metrics.listen`), if it serves.
+    pub fn metrics_addr(&self) -> Option<SocketAddr> {
+        self.metrics.as_ref().map(|m| m.addr)
     }
 
     /// Resolves when the pipeline thread ends by itself: `true` at the end of a non-looping recording
@@ -642,6 +656,9 @@ impl Daemon {
         }
         for t in self.server_tasks.drain(..) {
             let _ = tokio::time::timeout(Duration::from_millis(200), t).await;
+        }
+        if let Some(m) = self.metrics.take() {
+            m.stop().await;
         }
         for t in self.aux_tasks.drain(..) {
             t.abort();

@@ -183,12 +183,13 @@ impl Publisher {
                 status: inp.status,
                 fault: inp.fault as u16,
                 feeding: inp.feeding,
+                scale,
             };
             if let Some(h) = &self.history {
                 h.send(row);
             }
             if let Some(m) = &mut self.mqtt {
-                m.send(row, scale);
+                m.send(row);
             }
         }
         self.last_publish = Some(now);

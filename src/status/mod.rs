@@ -20,11 +20,12 @@ pub struct LatencyHistogram {
     buckets: [u32; 1001],
     count: u64,
     max_ms: f64,
+    sum_ms: f64,
 }
 
 impl Default for LatencyHistogram {
     fn default() -> Self {
-        Self { buckets: [0; 1001], count: 0, max_ms: 0.0 }
+        Self { buckets: [0; 1001], count: 0, max_ms: 0.0, sum_ms: 0.0 }
     }
 }
 
@@ -35,6 +36,9 @@ impl LatencyHistogram {
         self.buckets[i] = self.buckets[i].saturating_add(1);
         self.count += 1;
         self.max_ms = self.max_ms.max(ms);
+        if ms.is_finite() && ms >= 0.0 {
+            self.sum_ms += ms;
+        }
     }
     /// Samples recorded.
     pub fn count(&self) -> u64 {
@@ -43,6 +47,15 @@ impl LatencyHistogram {
     /// Largest latency seen, ms.
     pub fn max_ms(&self) -> f64 {
         self.max_ms
+    }
+    /// Sum of the latencies recorded (finite ones), ms: with [`Self::count`], the mean.
+    pub fn sum_ms(&self) -> f64 {
+        self.sum_ms
+    }
+    /// Samples below `ms` (whole milliseconds, the bucket resolution); from 1000 ms on, every sample
+    /// below 1 s (the overflow bucket holds the rest).
+    pub fn count_below_ms(&self, ms: u32) -> u64 {
+        self.buckets[..(ms as usize).min(1000)].iter().map(|&b| u64::from(b)).sum()
     }
     /// Upper bound of the 1 ms bucket holding quantile `q` (0..1), capped at the maximum, ms; `None` when empty.
     pub fn quantile_ms(&self, q: f64) -> Option<f64> {
@@ -287,6 +300,40 @@ impl HistoryStatus {
     }
 }
 
+/// The Prometheus endpoint's state (`docs/metrics.md`): what it serves on, set once when it starts
+/// or fails to (the console's `status` reads it), and its counters (exported by the endpoint itself).
+#[derive(Debug, Default)]
+pub struct MetricsStatus {
+    state: OnceLock<String>,
+    /// Responses sent, by status code, in the order of [`MetricsStatus::CODES`].
+    pub responses: [AtomicU64; 6],
+    /// Connections closed at accept: over the connection limit, or not in `output.metrics.allow`.
+    pub refused: AtomicU64,
+    /// Connections that ended before a complete request arrived (closed or reset by the peer).
+    pub aborted: AtomicU64,
+}
+
+impl MetricsStatus {
+    /// The status codes the endpoint answers with.
+    pub const CODES: [u16; 6] = [200, 400, 404, 405, 408, 431];
+
+    /// Records what the endpoint does (`on ADDR`, or why it is not serving); the first call wins.
+    pub fn set_state(&self, state: String) {
+        let _ = self.state.set(state);
+    }
+
+    /// One line for the console's `status`: `off`, `on ADDR (GET /metrics)` or why it failed.
+    pub fn describe(&self) -> &str {
+        self.state.get().map_or("off", String::as_str)
+    }
+
+    /// Counts one response with status `code` (a code outside [`Self::CODES`] counts as 400).
+    pub fn note_response(&self, code: u16) {
+        let i = Self::CODES.iter().position(|&c| c == code).unwrap_or(1);
+        self.responses[i].fetch_add(1, Ordering::Relaxed);
+    }
+}
+
 /// State shared by every thread and task of the daemon.
 #[derive(Debug)]
 pub struct Shared {
@@ -300,6 +347,8 @@ pub struct Shared {
     stopping: AtomicBool,
     /// The activity history's directory and counters.
     pub history: HistoryStatus,
+    /// The Prometheus endpoint's state and counters.
+    pub metrics: MetricsStatus,
 }
 
 impl Shared {
@@ -313,6 +362,7 @@ impl Shared {
             requests: Requests::default(),
             stopping: AtomicBool::new(false),
             history: HistoryStatus::default(),
+            metrics: MetricsStatus::default(),
         }
     }
 
@@ -396,6 +446,20 @@ mod tests {
         assert_eq!(h.quantile_ms(0.99), Some(99.0));
         h.record(5000.0);
         assert_eq!(h.quantile_ms(1.0), Some(5000.0));
+    }
+
+    #[test]
+    fn latency_sum_and_cumulative_counts() {
+        let mut h = LatencyHistogram::default();
+        for ms in [0.2, 4.9, 5.0, 999.9, 1000.0, f64::NAN] {
+            h.record(ms);
+        }
+        assert_eq!(h.count(), 6);
+        assert!((h.sum_ms() - 2010.0).abs() < 1e-9, "NaN is counted but not summed: {}", h.sum_ms());
+        assert_eq!(h.count_below_ms(0), 0);
+        assert_eq!(h.count_below_ms(5), 2, "below 5 ms: 0.2 and 4.9");
+        assert_eq!(h.count_below_ms(1000), 4);
+        assert_eq!(h.count_below_ms(u32::MAX), 4, "the overflow bucket (1000 ms, NaN) is never below a bound");
     }
 
     #[test]

@@ -124,6 +124,7 @@ fn write_day(dir: &Path, day: &str) {
             status: 15,
             fault,
             feeding: (12.0..13.0).contains(&h),
+            scale: fme::pipeline::ScaleSource::Fish,
         })
         .expect("write");
     }
@@ -176,6 +177,7 @@ fn report_bad_input_exits_2_naming_the_file_and_line() {
                 status: 15,
                 fault: 0,
                 feeding: false,
+                scale: fme::pipeline::ScaleSource::References,
             },
             &mut text,
         );

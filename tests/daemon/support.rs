@@ -149,6 +149,7 @@ impl Pipeline for FrameDiffPipeline {
             fish: 0,
             latency: Seconds(0.0),
             flags: QualityFlags { too_few_fish: true, depth_uncalibrated: true, stale: false },
+            scale: fme::pipeline::ScaleSource::None,
         }))
     }
 

@@ -1,0 +1,1097 @@
+//! The Prometheus endpoint (`[output.metrics]`, `docs/metrics.md`): a small HTTP/1.1 server that
+//! answers `GET /metrics` with the text exposition format 0.0.4.
+//!
+//! Each scrape renders a snapshot of [`Shared`] health and the [`RegisterBank`] counters; the
+//! pipeline never waits on it (a scrape holds the health lock only to copy the snapshot). The list
+//! of metric families is one function, [`families`]: a new family is one call there (and one row in
+//! `docs/metrics.md`).
+//!
+//! A hostile LAN is expected: at most [`MAX_CONNECTIONS`] connections at once and
+//! [`MAX_PER_PEER`] from one address (more are closed at accept and counted, so one host holding
+//! connections open cannot lock out the Prometheus server), `allow` filters peers, a request head over [`MAX_HEAD`] bytes is answered
+//! 431, a request not complete within [`REQUEST_TIMEOUT`] 408, an answer not read within
+//! [`WRITE_TIMEOUT`] ends the connection; one request per connection (`Connection: close`). Nothing
+//! on these paths panics on outside input; should a connection task panic anyway, it ends alone.
+//!
+//! Text format: <https://prometheus.io/docs/instrumenting/exposition_formats/> (0.0.4): `# HELP` and
+//! `# TYPE` once per family before its samples, label values escaped (`\\`, `\"`, `\n`), HELP text
+//! escaped (`\\`, `\n`), floats as Go writes them (`NaN`, `+Inf`, `-Inf`), histograms as cumulative
+//! `_bucket{le="..."}` samples ending with `le="+Inf"` equal to `_count`, then `_sum` and `_count`.
+
+use super::bank::RegisterBank;
+use super::log_throttle::LogThrottle;
+use super::registers::{self, BLOCK_LEN, status};
+use crate::backoff::Backoff;
+use crate::config::MetricsConfig;
+use crate::config::allow::AllowList;
+use crate::status::{Health, MetricsStatus, Shared};
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::net::{IpAddr, SocketAddr};
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+use tracing::Level;
+
+/// Connections served at once; one more is closed at accept (counted).
+pub const MAX_CONNECTIONS: usize = 8;
+/// Connections served at once from one IP address; one more from it is closed at accept (counted).
+pub const MAX_PER_PEER: usize = 4;
+/// Largest request head (request line and headers), bytes; a longer one is answered 431.
+pub const MAX_HEAD: usize = 8 * 1024;
+/// A request head not complete within this is answered 408.
+pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
+/// An answer not written within this (a peer that does not read) ends the connection.
+pub const WRITE_TIMEOUT: Duration = Duration::from_secs(5);
+/// The content type of the exposition.
+pub const CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
+
+/// Upper bounds of the frame-to-register latency histogram's buckets, s (`+Inf` follows). The health
+/// histogram has 1 ms resolution up to 1 s, so each bound counts the samples below it.
+pub const LATENCY_BOUNDS_S: [f64; 9] = [0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 0.75, 1.0];
+
+/// The status bits of register 10 by name (the console's words), exported as `fme_status_bit`.
+pub const STATUS_BITS: &[(u16, &str)] = &[
+    (status::RUNNING, "running"),
+    (status::CAMERA_OK, "camera-ok"),
+    (status::DETECTOR_OK, "detector-ok"),
+    (status::DEPTH_CALIBRATED, "depth-calibrated"),
+    (status::STALE, "stale"),
+    (status::PLC_LINK_OK, "plc-link-ok"),
+    (status::TOO_FEW_FISH, "too-few-fish"),
+    (status::RECORD_FAULT, "record-fault"),
+    (status::SCALE_FROM_FISH, "scale-from-fish"),
+    (status::TELEMETRY_FAULT, "telemetry-fault"),
+];
+
+// ---------------------------------------------------------------------------------------------
+// The text format.
+
+/// Kind of a metric family (`# TYPE`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Counter,
+    Gauge,
+    Histogram,
+}
+
+/// A Prometheus text-format (0.0.4) document under construction: one family per call, each with its
+/// `# HELP` and `# TYPE` lines. Names are checked in debug builds (and by the tests over the whole
+/// output); a value is written as Go's `strconv.FormatFloat` would parse it back.
+#[derive(Debug, Default)]
+pub struct Exposition {
+    out: String,
+    #[cfg(debug_assertions)]
+    names: Vec<String>,
+}
+
+/// Whether `s` is a valid metric name (`[a-zA-Z_:][a-zA-Z0-9_:]*`).
+pub fn valid_metric_name(s: &str) -> bool {
+    let mut c = s.chars();
+    c.next().is_some_and(|f| f.is_ascii_alphabetic() || f == '_' || f == ':')
+        && c.all(|x| x.is_ascii_alphanumeric() || x == '_' || x == ':')
+}
+
+/// Whether `s` is a valid label name (`[a-zA-Z_][a-zA-Z0-9_]*`, not starting with `__`).
+pub fn valid_label_name(s: &str) -> bool {
+    let mut c = s.chars();
+    !s.starts_with("__")
+        && c.next().is_some_and(|f| f.is_ascii_alphabetic() || f == '_')
+        && c.all(|x| x.is_ascii_alphanumeric() || x == '_')
+}
+
+/// Appends `v` as the text format writes a sample value.
+fn push_value(out: &mut String, v: f64) {
+    if v.is_nan() {
+        out.push_str("NaN");
+    } else if v.is_infinite() {
+        out.push_str(if v > 0.0 { "+Inf" } else { "-Inf" });
+    } else {
+        let _ = write!(out, "{v}");
+    }
+}
+
+/// Appends a label value with `\`, `"` and newline escaped.
+fn push_label_value(out: &mut String, v: &str) {
+    for c in v.chars() {
+        match c {
+            '\\' => out.push_str("\\\\"),
+            '"' => out.push_str("\\\""),
+            '\n' => out.push_str("\\n"),
+            c => out.push(c),
+        }
+    }
+}
+
+/// Appends HELP text with `\` and newline escaped.
+fn push_help(out: &mut String, v: &str) {
+    for c in v.chars() {
+        match c {
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            c => out.push(c),
+        }
+    }
+}
+
+impl Exposition {
+    /// An empty document.
+    pub fn new() -> Self {
+        Self { out: String::with_capacity(16 * 1024), ..Self::default() }
+    }
+
+    fn header(&mut self, name: &str, kind: Kind, help: &str) {
+        debug_assert!(valid_metric_name(name), "bad metric name {name:?}");
+        debug_assert!(kind != Kind::Counter || name.ends_with("_total"), "counter {name} must end in _total");
+        #[cfg(debug_assertions)]
+        {
+            debug_assert!(!self.names.iter().any(|n| n == name), "family {name} written twice");
+            self.names.push(name.to_string());
+        }
+        let kind = match kind {
+            Kind::Counter => "counter",
+            Kind::Gauge => "gauge",
+            Kind::Histogram => "histogram",
+        };
+        let _ = write!(self.out, "# HELP {name} ");
+        push_help(&mut self.out, help);
+        let _ = write!(self.out, "\n# TYPE {name} {kind}\n");
+    }
+
+    fn sample(&mut self, name: &str, suffix: &str, labels: &[(&str, &str)], value: f64) {
+        self.out.push_str(name);
+        self.out.push_str(suffix);
+        if !labels.is_empty() {
+            self.out.push('{');
+            for (i, (k, v)) in labels.iter().enumerate() {
+                debug_assert!(valid_label_name(k), "bad label name {k:?}");
+                if i > 0 {
+                    self.out.push(',');
+                }
+                self.out.push_str(k);
+                self.out.push_str("=\"");
+                push_label_value(&mut self.out, v);
+                self.out.push('"');
+            }
+            self.out.push('}');
+        }
+        self.out.push(' ');
+        push_value(&mut self.out, value);
+        self.out.push('\n');
+    }
+
+    /// A gauge without labels.
+    pub fn gauge(&mut self, name: &str, help: &str, v: f64) {
+        self.header(name, Kind::Gauge, help);
+        self.sample(name, "", &[], v);
+    }
+
+    /// A gauge with one label: one sample per `(label value, value)`.
+    pub fn gauge_by(&mut self, name: &str, help: &str, label: &str, items: &[(&str, f64)]) {
+        self.header(name, Kind::Gauge, help);
+        for (l, v) in items {
+            self.sample(name, "", &[(label, l)], *v);
+        }
+    }
+
+    /// An info gauge: one sample of value 1 carrying `labels`.
+    pub fn info(&mut self, name: &str, help: &str, labels: &[(&str, &str)]) {
+        self.header(name, Kind::Gauge, help);
+        self.sample(name, "", labels, 1.0);
+    }
+
+    /// A counter without labels (`name` ends in `_total`).
+    pub fn counter(&mut self, name: &str, help: &str, v: u64) {
+        self.header(name, Kind::Counter, help);
+        self.sample(name, "", &[], v as f64);
+    }
+
+    /// A counter with one label: one sample per `(label value, value)`.
+    pub fn counter_by(&mut self, name: &str, help: &str, label: &str, items: &[(&str, u64)]) {
+        self.header(name, Kind::Counter, help);
+        for (l, v) in items {
+            self.sample(name, "", &[(label, l)], *v as f64);
+        }
+    }
+
+    /// A histogram: `buckets` are `(upper bound, samples <= bound)` in increasing bound order,
+    /// cumulative; a `+Inf` bucket equal to `count` is added unless the last bound is `+Inf` (then
+    /// its count must be `count`). Counts are made non-decreasing and capped at `count`, so the
+    /// output is a valid histogram whatever the input.
+    pub fn histogram(&mut self, name: &str, help: &str, buckets: &[(f64, u64)], count: u64, sum: f64) {
+        self.header(name, Kind::Histogram, help);
+        let mut prev = 0u64;
+        let mut le = String::with_capacity(16);
+        for &(bound, n) in buckets.iter().filter(|(b, _)| b.is_finite()) {
+            let n = n.clamp(prev, count);
+            prev = n;
+            le.clear();
+            push_value(&mut le, bound);
+            self.sample(name, "_bucket", &[("le", &le)], n as f64);
+        }
+        self.sample(name, "_bucket", &[("le", "+Inf")], count as f64);
+        self.sample(name, "_sum", &[], sum);
+        self.sample(name, "_count", &[], count as f64);
+    }
+
+    /// The document.
+    pub fn finish(self) -> String {
+        self.out
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// What is exported.
+
+/// Everything one scrape exports, copied at once (the health lock is held only for the copy).
+#[derive(Debug, Clone)]
+pub struct Snapshot {
+    /// The health snapshot.
+    pub health: Health,
+    /// When it was taken.
+    pub now: Instant,
+    /// The register block the PLC reads (status word, fault code, feeding).
+    pub block: [u16; BLOCK_LEN],
+    /// Modbus counters.
+    pub modbus: super::bank::ModbusCounters,
+    /// History rows written, dropped, failed.
+    pub history: [u64; 3],
+    /// The history is paused after a write error.
+    pub history_paused: bool,
+    /// Responses by code ([`MetricsStatus::CODES`]), refused and aborted connections of this endpoint.
+    pub http: ([u64; 6], u64, u64),
+    /// `output.stale_after_s`: an older activity value is exported as NaN (as registers 0-7).
+    pub stale_after: Duration,
+}
+
+impl Snapshot {
+    /// Copies what a scrape exports from the shared state and the bank.
+    pub fn take(shared: &Shared, bank: &RegisterBank, stale_after: Duration) -> Self {
+        let h = &shared.history;
+        let m: &MetricsStatus = &shared.metrics;
+        Self {
+            health: shared.health(),
+            now: Instant::now(),
+            block: bank.block(),
+            modbus: bank.counters(),
+            history: [
+                h.written.load(Ordering::Relaxed),
+                h.dropped.load(Ordering::Relaxed),
+                h.failed.load(Ordering::Relaxed),
+            ],
+            history_paused: h.paused.load(Ordering::Relaxed),
+            http: (
+                std::array::from_fn(|i| m.responses[i].load(Ordering::Relaxed)),
+                m.refused.load(Ordering::Relaxed),
+                m.aborted.load(Ordering::Relaxed),
+            ),
+            stale_after,
+        }
+    }
+}
+
+fn b(v: bool) -> f64 {
+    if v { 1.0 } else { 0.0 }
+}
+
+/// Every exported metric family (`docs/metrics.md` lists them). Base units (s, m/s); counters end
+/// in `_total`. Adding a family is one call here.
+pub fn families(s: &Snapshot, e: &mut Exposition) {
+    let h = &s.health;
+    let (maj, min) = registers::version();
+    let map = format!("{maj}.{min}");
+    e.info(
+        "fme_build_info",
+        "fme version and register-map version (value 1).",
+        &[("version", env!("CARGO_PKG_VERSION")), ("register_map", &map)],
+    );
+    e.gauge(
+        "fme_uptime_seconds",
+        "Time since the daemon started, s.",
+        s.now.saturating_duration_since(h.started).as_secs_f64(),
+    );
+
+    // The activity index (paper eq. 5) as the registers publish it: NaN when there is no value or it
+    // is older than output.stale_after_s.
+    let age = h.last_sample_at.map(|t| s.now.saturating_duration_since(t));
+    let sample = h.last_sample.filter(|_| age.is_some_and(|a| a <= s.stale_after));
+    let nan = f64::NAN;
+    e.gauge(
+        "fme_activity_mean_meters_per_second",
+        "Swarm mean 3D speed (activity index, paper eq. 5), m/s; NaN when unavailable or stale.",
+        sample.map_or(nan, |x| x.mean.get()),
+    );
+    e.gauge(
+        "fme_activity_smoothed_meters_per_second",
+        "Smoothed activity index (motion.smoothing_s), m/s; NaN when unavailable or stale.",
+        sample.map_or(nan, |x| x.smoothed.get()),
+    );
+    e.gauge(
+        "fme_activity_ci95_half_width_meters_per_second",
+        "Half-width of the 95% interval of the activity mean, m/s; NaN when unavailable or stale.",
+        sample.map_or(nan, |x| x.ci95_half.get()),
+    );
+    e.gauge(
+        "fme_activity_mean_body_lengths_per_second",
+        "Swarm mean speed in body lengths per second; NaN when unavailable or stale.",
+        sample.map_or(nan, |x| x.mean_body_lengths),
+    );
+    e.gauge(
+        "fme_activity_age_seconds",
+        "Age of the last activity value, s (+Inf before the first).",
+        age.map_or(f64::INFINITY, |a| a.as_secs_f64()),
+    );
+    e.gauge(
+        "fme_fish",
+        "Fish in the activity mean (0 when unavailable or stale).",
+        sample.map_or(0.0, |x| f64::from(x.fish)),
+    );
+    e.gauge("fme_tracks", "Confirmed tracks.", f64::from(h.stage.tracks));
+
+    // What the PLC reads in registers 10, 11 and 17.
+    let word = s.block[10];
+    e.gauge("fme_status_word", "Status bits as register 10 holds them (docs/plc-integration.md).", f64::from(word));
+    let bits: Vec<(&str, f64)> = STATUS_BITS.iter().map(|&(bit, name)| (name, b(word & bit != 0))).collect();
+    e.gauge_by("fme_status_bit", "Each status bit of register 10 by name (0/1).", "name", &bits);
+    e.gauge(
+        "fme_fault_code",
+        "Fault code of register 11: 0 none, 1 camera, 2 detector, 3 depth, 4 pipeline stalled, 5 PLC link, 6 stopped.",
+        f64::from(s.block[11]),
+    );
+    e.gauge("fme_feeding_recommended", "Feeding recommended (register 17, 0/1).", f64::from(s.block[17]));
+
+    // Camera and pipeline.
+    e.gauge("fme_camera_frames_per_second", "Camera frame rate over the last second, frames/s.", h.camera_fps);
+    e.counter("fme_frames_captured_total", "Frames captured.", h.frames_captured);
+    e.counter("fme_frames_processed_total", "Frames processed by the pipeline.", h.frames_processed);
+    e.counter(
+        "fme_frames_dropped_total",
+        "Frames dropped: capture queue full, driver sequence gaps.",
+        h.frames_dropped,
+    );
+    e.counter(
+        "fme_capture_errors_total",
+        "Capture errors (timeouts, read errors, oversized frames).",
+        h.capture_errors,
+    );
+    e.counter("fme_camera_reconnects_total", "Camera reconnects.", h.reconnects);
+    e.counter("fme_pipeline_errors_total", "Pipeline errors (bad frames, stage failures).", h.pipeline_errors);
+    e.counter("fme_updates_total", "Register updates published.", h.updates);
+    e.gauge("fme_detector_runs_per_second", "Detector runs per second achieved.", h.stage.detector_hz);
+    e.gauge("fme_depth_runs_per_second", "Depth network runs per second achieved.", h.stage.depth_hz);
+    e.gauge(
+        "fme_calibration_residual_meters",
+        "RMS residual of the metric depth fit on the reference objects (paper eq. 1-2), m; NaN when uncalibrated.",
+        if h.calib.calibrated { h.calib.residual_m } else { nan },
+    );
+    e.gauge(
+        "fme_calibration_references_visible",
+        "Reference objects visible in the last depth frame.",
+        f64::from(h.calib.references_visible),
+    );
+    let l = &h.latency;
+    let buckets: Vec<(f64, u64)> =
+        LATENCY_BOUNDS_S.iter().map(|&le| (le, l.count_below_ms((le * 1000.0).round() as u32))).collect();
+    e.histogram(
+        "fme_frame_to_register_latency_seconds",
+        "Time from a frame's arrival to the register update it produced, s (1 ms resolution).",
+        &buckets,
+        l.count(),
+        l.sum_ms() / 1000.0,
+    );
+
+    // Modbus (docs/plc-integration.md).
+    let m = &s.modbus;
+    e.counter("fme_modbus_requests_total", "Modbus requests served (server roles).", m.requests);
+    e.counter("fme_modbus_exceptions_total", "Modbus exception responses sent (server roles).", m.exceptions);
+    e.gauge("fme_modbus_tcp_connections", "Modbus TCP connections open now.", m.tcp_open as f64);
+    e.counter_by(
+        "fme_modbus_tcp_closed_total",
+        "Modbus TCP connections closed by the server: idle timeout, evicted for a newer one, refused (allow), bad MBAP header.",
+        "reason",
+        &[("idle", m.tcp_idle_closed), ("evicted", m.tcp_evicted), ("refused", m.tcp_refused), ("bad_frame", m.tcp_bad_frames)],
+    );
+    e.counter("fme_modbus_tcp_accept_errors_total", "Failed accepts of the Modbus TCP server.", m.tcp_accept_errors);
+    e.counter("fme_modbus_task_panics_total", "Modbus connection or server tasks that panicked.", m.task_panics);
+    e.counter("fme_plc_writes_total", "Successful block writes to the PLC (client roles).", m.client_writes);
+    e.counter(
+        "fme_plc_write_failures_total",
+        "Failed connects or block writes to the PLC (client roles).",
+        m.client_failures,
+    );
+
+    // History (docs/history.md) and recorder (docs/recording.md).
+    e.counter("fme_history_rows_written_total", "History rows written.", s.history[0]);
+    e.counter("fme_history_rows_dropped_total", "History rows dropped (writer queue full).", s.history[1]);
+    e.counter(
+        "fme_history_rows_failed_total",
+        "History rows not written (write error, or paused after one).",
+        s.history[2],
+    );
+    e.gauge("fme_history_paused", "History paused after a write error (0/1).", b(s.history_paused));
+    let r = &h.record;
+    e.gauge("fme_record_active", "The black-box recorder runs (0/1).", b(r.active));
+    e.counter("fme_record_frames_written_total", "Frames written to the black-box ring.", r.frames_written);
+    e.counter("fme_record_frames_dropped_total", "Frames not recorded (queue full or disk failed).", r.frames_dropped);
+    e.counter("fme_record_write_errors_total", "Recorder write errors.", r.write_errors);
+    e.gauge("fme_record_disk_fault", "Recording paused after a write error (0/1).", b(r.disk_fault));
+    e.gauge("fme_record_ring_bytes", "Bytes in the black-box ring.", r.ring_bytes as f64);
+    e.gauge("fme_record_ring_frames", "Frames in the black-box ring.", r.ring_frames as f64);
+    e.counter("fme_record_saved_total", "Frozen recordings written.", r.saved);
+    e.counter("fme_record_snapshots_total", "Snapshots written.", r.snapshots);
+
+    // This endpoint.
+    let (codes, refused, aborted) = &s.http;
+    let names = MetricsStatus::CODES.map(|c| c.to_string());
+    let by_code: Vec<(&str, u64)> = names.iter().map(String::as_str).zip(codes.iter().copied()).collect();
+    e.counter_by("fme_metrics_http_responses_total", "Responses of this endpoint by status code.", "code", &by_code);
+    e.counter(
+        "fme_metrics_connections_refused_total",
+        "Connections to this endpoint closed at accept (connection limits, output.metrics.allow).",
+        *refused,
+    );
+    e.counter(
+        "fme_metrics_connections_aborted_total",
+        "Connections to this endpoint that ended before a complete request.",
+        *aborted,
+    );
+}
+
+/// The exposition of `s`.
+pub fn render(s: &Snapshot) -> String {
+    let mut e = Exposition::new();
+    families(s, &mut e);
+    e.finish()
+}
+
+// ---------------------------------------------------------------------------------------------
+// HTTP.
+
+/// The answer to a request head.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Route {
+    /// `GET /metrics` (`head`: `HEAD /metrics`, no body).
+    Metrics {
+        /// HEAD: headers only.
+        head: bool,
+    },
+    /// An error status (400, 404, 405, 408, 431).
+    Error(u16),
+}
+
+/// Routes a complete request head (request line first; headers are not needed). Never panics.
+pub fn route(head: &[u8]) -> Route {
+    let line_end = head.iter().position(|&c| c == b'\n').unwrap_or(head.len());
+    let Ok(line) = std::str::from_utf8(&head[..line_end]) else { return Route::Error(400) };
+    let mut parts = line.trim_end_matches('\r').split(' ');
+    let (Some(method), Some(target), Some(version), None) = (parts.next(), parts.next(), parts.next(), parts.next())
+    else {
+        return Route::Error(400);
+    };
+    if method.is_empty() || !method.bytes().all(|c| c.is_ascii_uppercase()) || !target.starts_with('/') {
+        return Route::Error(400);
+    }
+    if !matches!(version, "HTTP/1.0" | "HTTP/1.1") {
+        return Route::Error(400);
+    }
+    let path = target.split_once('?').map_or(target, |(p, _)| p);
+    if path != "/metrics" {
+        return Route::Error(404);
+    }
+    match method {
+        "GET" => Route::Metrics { head: false },
+        "HEAD" => Route::Metrics { head: true },
+        _ => Route::Error(405),
+    }
+}
+
+/// The reason phrase of a status code.
+fn reason(code: u16) -> &'static str {
+    match code {
+        200 => "OK",
+        404 => "Not Found",
+        405 => "Method Not Allowed",
+        408 => "Request Timeout",
+        431 => "Request Header Fields Too Large",
+        _ => "Bad Request",
+    }
+}
+
+/// The complete response (head and, unless `head_only`, body).
+fn response(code: u16, body: &str, head_only: bool) -> Vec<u8> {
+    let ctype = if code == 200 { CONTENT_TYPE } else { "text/plain; charset=utf-8" };
+    let mut out = format!(
+        "HTTP/1.1 {code} {}\r\nContent-Type: {ctype}\r\nContent-Length: {}\r\nConnection: close\r\nCache-Control: no-store\r\n",
+        reason(code),
+        body.len()
+    );
+    if code == 405 {
+        out.push_str("Allow: GET, HEAD\r\n");
+    }
+    out.push_str("\r\n");
+    let mut out = out.into_bytes();
+    if !head_only {
+        out.extend_from_slice(body.as_bytes());
+    }
+    out
+}
+
+/// How reading a request head ended.
+#[derive(Debug, PartialEq, Eq)]
+enum Head {
+    /// Complete: this many bytes (up to and including the blank line).
+    Complete(usize),
+    /// [`MAX_HEAD`] bytes without the blank line.
+    TooLarge,
+    /// The peer closed (or reset) first.
+    Closed,
+}
+
+/// Where the blank line ending a head is in `buf` (searching from `from`): the byte after it.
+fn head_end(buf: &[u8], from: usize) -> Option<usize> {
+    let start = from.saturating_sub(3);
+    (start..buf.len()).find_map(|i| {
+        if buf[i..].starts_with(b"\r\n\r\n") {
+            Some(i + 4)
+        } else if buf[i..].starts_with(b"\n\n") {
+            Some(i + 2)
+        } else {
+            None
+        }
+    })
+}
+
+async fn read_head<R: tokio::io::AsyncRead + Unpin>(r: &mut R, buf: &mut [u8; MAX_HEAD]) -> Head {
+    let mut len = 0;
+    loop {
+        if len == buf.len() {
+            return Head::TooLarge;
+        }
+        match r.read(&mut buf[len..]).await {
+            Ok(0) | Err(_) => return Head::Closed,
+            Ok(n) => {
+                let from = len;
+                len += n;
+                if let Some(end) = head_end(&buf[..len], from) {
+                    return Head::Complete(end);
+                }
+            }
+        }
+    }
+}
+
+/// What a connection needs: the shared state, the bank and the staleness limit.
+#[derive(Debug, Clone)]
+struct Ctx {
+    shared: Arc<Shared>,
+    bank: Arc<RegisterBank>,
+    stale_after: Duration,
+}
+
+/// Connections open per peer address.
+type PeerCounts = Arc<Mutex<HashMap<IpAddr, usize>>>;
+
+/// One connection's place in [`PeerCounts`], given back when its task ends (also by a panic or an
+/// abort).
+#[derive(Debug)]
+struct PeerSlot {
+    peers: PeerCounts,
+    ip: IpAddr,
+}
+
+impl PeerSlot {
+    /// Takes a place for `ip`, unless it already holds [`MAX_PER_PEER`].
+    fn take(peers: &PeerCounts, ip: IpAddr) -> Option<Self> {
+        let mut m = peers.lock().unwrap_or_else(|p| p.into_inner());
+        let n = m.entry(ip).or_insert(0);
+        if *n >= MAX_PER_PEER {
+            return None;
+        }
+        *n += 1;
+        Some(Self { peers: peers.clone(), ip })
+    }
+}
+
+impl Drop for PeerSlot {
+    fn drop(&mut self) {
+        let mut m = self.peers.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(n) = m.get_mut(&self.ip) {
+            *n = n.saturating_sub(1);
+            if *n == 0 {
+                m.remove(&self.ip);
+            }
+        }
+    }
+}
+
+async fn serve_connection(mut stream: tokio::net::TcpStream, ctx: Ctx, _slot: PeerSlot) {
+    let mut buf = Box::new([0u8; MAX_HEAD]);
+    let deadline = tokio::time::Instant::now() + REQUEST_TIMEOUT;
+    let head = tokio::time::timeout_at(deadline, read_head(&mut stream, &mut buf)).await;
+    let (code, head_only) = match head {
+        Ok(Head::Complete(n)) => match route(&buf[..n]) {
+            Route::Metrics { head } => (200, head),
+            Route::Error(c) => (c, false),
+        },
+        Ok(Head::TooLarge) => (431, false),
+        Ok(Head::Closed) => {
+            ctx.shared.metrics.aborted.fetch_add(1, Ordering::Relaxed);
+            return;
+        }
+        Err(_) => (408, false),
+    };
+    let out = if code == 200 {
+        let snap = Snapshot::take(&ctx.shared, &ctx.bank, ctx.stale_after);
+        response(200, &render(&snap), head_only)
+    } else {
+        let body = match code {
+            404 => "not found: the metrics are at /metrics\n",
+            405 => "method not allowed: use GET or HEAD\n",
+            408 => "request timeout\n",
+            431 => "request head too large\n",
+            _ => "bad request\n",
+        };
+        response(code, body, false)
+    };
+    ctx.shared.metrics.note_response(code);
+    let written = tokio::time::timeout(WRITE_TIMEOUT, async {
+        stream.write_all(&out).await?;
+        stream.shutdown().await
+    })
+    .await;
+    if matches!(written, Ok(Ok(()))) && code != 200 {
+        // The peer may still be sending (a body, an oversized head): read a little of it so that
+        // closing does not reset the connection before the peer has read the answer.
+        let mut sink = [0u8; 1024];
+        let _ = tokio::time::timeout(Duration::from_millis(200), async {
+            let mut left = 64 * 1024usize;
+            while left > 0 {
+                match stream.read(&mut sink).await {
+                    Ok(0) | Err(_) => break,
+                    Ok(n) => left = left.saturating_sub(n),
+                }
+            }
+        })
+        .await;
+    }
+}
+
+/// The running endpoint: its address, its task and its stop signal.
+#[derive(Debug)]
+pub struct MetricsServer {
+    /// The bound address (useful with port 0).
+    pub addr: SocketAddr,
+    stop: tokio::sync::oneshot::Sender<()>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl MetricsServer {
+    /// Stops accepting and ends the open connections (waits at most 200 ms).
+    pub async fn stop(self) {
+        let _ = self.stop.send(());
+        let _ = tokio::time::timeout(Duration::from_millis(200), self.task).await;
+    }
+}
+
+/// At most one message per this period about refused connections or panicked tasks (each counted).
+const LOG_PERIOD: Duration = Duration::from_secs(10);
+
+/// Starts the endpoint of `cfg` (inside a tokio runtime); `None` when `listen` is empty or the
+/// address cannot be bound. A bind failure is logged (journal and console `log`) and shown by the
+/// console's `status`; it never stops the daemon.
+pub async fn spawn(
+    cfg: &MetricsConfig,
+    stale_after: Duration,
+    shared: &Arc<Shared>,
+    bank: &Arc<RegisterBank>,
+) -> Option<MetricsServer> {
+    if cfg.listen.is_empty() {
+        return None;
+    }
+    // Checked by `Config::validate`; a bad entry here would allow nobody rather than everyone.
+    let allow = AllowList::parse(&cfg.allow).unwrap_or_else(|_| AllowList::nobody());
+    let bound = match tokio::net::TcpListener::bind(&cfg.listen).await {
+        Ok(l) => l.local_addr().map(|a| (l, a)),
+        Err(e) => Err(e),
+    };
+    let (listener, addr) = match bound {
+        Ok(x) => x,
+        Err(e) => {
+            let msg = format!("cannot listen on {} (output.metrics.listen): {e}", cfg.listen);
+            shared.log(Level::ERROR, format!("metrics: {msg}; the Prometheus endpoint is off, everything else runs"));
+            shared.metrics.set_state(format!("failed: {msg}"));
+            return None;
+        }
+    };
+    shared.metrics.set_state(format!("on {addr} (GET /metrics)"));
+    shared.log(Level::INFO, format!("metrics: Prometheus endpoint on http://{addr}/metrics"));
+    let ctx = Ctx { shared: shared.clone(), bank: bank.clone(), stale_after };
+    let (stop, rx) = tokio::sync::oneshot::channel::<()>();
+    let task = tokio::spawn(serve(listener, allow, ctx, async move {
+        let _ = rx.await;
+    }));
+    Some(MetricsServer { addr, stop, task })
+}
+
+async fn serve(
+    listener: tokio::net::TcpListener,
+    allow: AllowList,
+    ctx: Ctx,
+    shutdown: impl std::future::Future<Output = ()>,
+) {
+    let mut tasks = tokio::task::JoinSet::new();
+    let peers = PeerCounts::default();
+    let mut shutdown = std::pin::pin!(shutdown);
+    let mut backoff = Backoff::new(Duration::from_millis(100), Duration::from_secs(5));
+    let mut refused_log = LogThrottle::new(LOG_PERIOD);
+    let mut panic_log = LogThrottle::new(LOG_PERIOD);
+    let note_done = |done: Result<(), tokio::task::JoinError>, log: &mut LogThrottle| {
+        if let Err(e) = done
+            && e.is_panic()
+            && let Some(n) = log.allow(tokio::time::Instant::now())
+        {
+            ctx.shared
+                .log(Level::ERROR, format!("metrics: a connection task panicked ({n} more since the last message)"));
+        }
+    };
+    loop {
+        tokio::select! {
+            () = &mut shutdown => return, // dropping the JoinSet aborts the connection tasks
+            Some(done) = tasks.join_next(), if !tasks.is_empty() => note_done(done, &mut panic_log),
+            accepted = listener.accept() => match accepted {
+                Ok((stream, peer)) => {
+                    backoff.reset();
+                    while let Some(done) = tasks.try_join_next() {
+                        note_done(done, &mut panic_log);
+                    }
+                    let admitted = if !allow.permits(peer.ip()) {
+                        Err("not in output.metrics.allow")
+                    } else if tasks.len() >= MAX_CONNECTIONS {
+                        Err("connection limit reached")
+                    } else {
+                        PeerSlot::take(&peers, peer.ip()).ok_or("per-address limit reached")
+                    };
+                    match admitted {
+                        Ok(slot) => {
+                            let _ = stream.set_nodelay(true);
+                            tasks.spawn(serve_connection(stream, ctx.clone(), slot));
+                        }
+                        Err(why) => {
+                            ctx.shared.metrics.refused.fetch_add(1, Ordering::Relaxed);
+                            if let Some(n) = refused_log.allow(tokio::time::Instant::now()) {
+                                tracing::warn!("metrics: connection from {peer} refused ({why}; {n} more since the last message)");
+                            }
+                            drop(stream);
+                        }
+                    }
+                }
+                Err(e) => {
+                    let pause = backoff.next_delay();
+                    tracing::warn!("metrics: accept failed: {e}; accepting again in {:.1} s", pause.as_secs_f64());
+                    tokio::select! {
+                        _ = tokio::time::sleep(pause) => {},
+                        () = &mut shutdown => return,
+                    }
+                }
+            },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::{ActivitySample, QualityFlags};
+    use crate::units::{MetresPerSecond, Seconds};
+
+    fn snapshot() -> Snapshot {
+        let shared = Shared::new(String::new(), 4);
+        let bank = RegisterBank::new();
+        shared.with_health(|h| {
+            h.frames_captured = 120;
+            h.frames_processed = 118;
+            h.last_sample = Some(ActivitySample {
+                timestamp: Seconds(4.0),
+                mean: MetresPerSecond(0.25),
+                mean_body_lengths: 1.25,
+                smoothed: MetresPerSecond(0.2),
+                ci95_half: MetresPerSecond(0.03),
+                fish: 17,
+                latency: Seconds(0.0),
+                flags: QualityFlags::default(),
+                scale: crate::pipeline::ScaleSource::References,
+            });
+            h.last_sample_at = Some(Instant::now());
+            for ms in [0.5, 3.0, 7.0, 40.0, 2000.0] {
+                h.latency.record(ms);
+            }
+        });
+        let inp = registers::RegisterInputs {
+            status: status::RUNNING | status::CAMERA_OK | status::STALE,
+            fault: registers::FaultCode::Depth,
+            feeding: true,
+            ..Default::default()
+        };
+        bank.publish(registers::encode(&inp, crate::config::WordOrder::HighFirst));
+        Snapshot::take(&shared, &bank, Duration::from_secs(5))
+    }
+
+    /// The samples of `text` as (name with labels, value), checking each line's grammar on the way.
+    fn samples(text: &str) -> Vec<(String, String)> {
+        let mut out = Vec::new();
+        for line in text.lines() {
+            if line.starts_with('#') {
+                let mut w = line.splitn(4, ' ');
+                let (_, kw, name) = (w.next(), w.next(), w.next().unwrap_or(""));
+                assert!(matches!(kw, Some("HELP") | Some("TYPE")), "{line}");
+                assert!(valid_metric_name(name), "{line}");
+                continue;
+            }
+            let (key, value) = line.rsplit_once(' ').unwrap_or(("", ""));
+            let name = key.split('{').next().unwrap_or("");
+            assert!(valid_metric_name(name), "{line}");
+            assert!(value == "NaN" || value == "+Inf" || value.parse::<f64>().is_ok(), "{line}");
+            out.push((key.to_string(), value.to_string()));
+        }
+        out
+    }
+
+    fn value(text: &str, key: &str) -> String {
+        samples(text).into_iter().find(|(k, _)| k == key).map(|(_, v)| v).unwrap_or_else(|| panic!("no {key}"))
+    }
+
+    #[test]
+    fn escapes_label_values_and_help() {
+        let mut e = Exposition::new();
+        e.info("x_info", "a \\ b\nc \"q\"", &[("path", "C:\\dir \"quoted\"\nnext")]);
+        let t = e.finish();
+        assert_eq!(
+            t,
+            "# HELP x_info a \\\\ b\\nc \"q\"\n# TYPE x_info gauge\nx_info{path=\"C:\\\\dir \\\"quoted\\\"\\nnext\"} 1\n"
+        );
+        let parsed = openmetrics_parser::prometheus::parse_prometheus(&t).expect("parses");
+        assert_eq!(parsed.families.len(), 1);
+    }
+
+    #[test]
+    fn special_values_are_written_as_go_parses_them() {
+        let mut e = Exposition::new();
+        e.gauge("a", "h", f64::NAN);
+        e.gauge("b", "h", f64::INFINITY);
+        e.gauge("c", "h", f64::NEG_INFINITY);
+        e.gauge("d", "h", 0.1 + 0.2);
+        e.counter("e_total", "h", u64::from(u32::MAX) + 1);
+        let t = e.finish();
+        for (k, v) in
+            [("a", "NaN"), ("b", "+Inf"), ("c", "-Inf"), ("d", "0.30000000000000004"), ("e_total", "4294967296")]
+        {
+            assert_eq!(value(&t, k), v, "{k}");
+        }
+    }
+
+    #[test]
+    fn histogram_is_cumulative_and_ends_with_inf_equal_to_count() {
+        let mut e = Exposition::new();
+        // A decreasing count and one above the total are repaired, not written.
+        e.histogram("lat_seconds", "h", &[(0.1, 2), (0.5, 1), (1.0, 9)], 5, 1.5);
+        let t = e.finish();
+        let s = samples(&t);
+        let buckets: Vec<&str> = s.iter().filter(|(k, _)| k.contains("_bucket")).map(|(_, v)| v.as_str()).collect();
+        assert_eq!(buckets, ["2", "2", "5", "5"]);
+        assert_eq!(value(&t, "lat_seconds_bucket{le=\"+Inf\"}"), "5");
+        assert_eq!(value(&t, "lat_seconds_bucket{le=\"0.1\"}"), "2");
+        assert_eq!(value(&t, "lat_seconds_bucket{le=\"1\"}"), "5");
+        assert_eq!(value(&t, "lat_seconds_sum"), "1.5");
+        assert_eq!(value(&t, "lat_seconds_count"), "5");
+        openmetrics_parser::prometheus::parse_prometheus(&t).expect("parses");
+    }
+
+    #[test]
+    fn the_parser_used_as_oracle_rejects_broken_expositions() {
+        let parse = |t: &str| openmetrics_parser::prometheus::parse_prometheus(t).is_ok();
+        let ok = "# HELP h_seconds h\n# TYPE h_seconds histogram\nh_seconds_bucket{le=\"1\"} 1\nh_seconds_bucket{le=\"+Inf\"} 2\nh_seconds_sum 3\nh_seconds_count 2\n";
+        assert!(parse(ok));
+        assert!(!parse(&ok.replace("{le=\"1\"} 1", "{le=\"1\"} 3")), "buckets not cumulative");
+        assert!(!parse(&ok.replace("h_seconds_bucket{le=\"+Inf\"} 2\n", "")), "no +Inf bucket");
+        assert!(!parse("# TYPE g gauge\ng{name=\"a\\q\"} 1\n"), "bad escape in a label value");
+        assert!(!parse("# TYPE g gauge\ng 1 2 3\n"), "garbage after the value");
+    }
+
+    #[test]
+    fn every_family_once_with_valid_names_and_a_strict_parser_accepts_it() {
+        let snap = snapshot();
+        let t = render(&snap);
+        let mut families = Vec::new();
+        for line in t.lines().filter(|l| l.starts_with("# TYPE ")) {
+            let name = line.split(' ').nth(2).unwrap_or("").to_string();
+            assert!(!families.contains(&name), "{name} twice");
+            families.push(name);
+        }
+        assert!(families.len() >= 50, "{} families", families.len());
+        assert!(families.iter().all(|f| f.starts_with("fme_")), "{families:?}");
+        let parsed = openmetrics_parser::prometheus::parse_prometheus(&t).unwrap_or_else(|e| panic!("{e:?}\n{t}"));
+        assert_eq!(parsed.families.len(), families.len());
+        assert_eq!(value(&t, "fme_fish"), "17");
+        assert_eq!(value(&t, "fme_activity_mean_meters_per_second"), "0.25");
+        assert_eq!(value(&t, "fme_frames_captured_total"), "120");
+        assert_eq!(value(&t, "fme_status_bit{name=\"camera-ok\"}"), "1");
+        assert_eq!(value(&t, "fme_status_bit{name=\"stale\"}"), "1");
+        assert_eq!(value(&t, "fme_status_bit{name=\"detector-ok\"}"), "0");
+        assert_eq!(value(&t, "fme_status_word"), "19");
+        assert_eq!(value(&t, "fme_fault_code"), "3");
+        assert_eq!(value(&t, "fme_feeding_recommended"), "1");
+        assert_eq!(value(&t, "fme_activity_age_seconds").parse::<f64>().map(|a| a < 5.0), Ok(true));
+        assert_eq!(
+            value(&t, &format!("fme_build_info{{version=\"{}\",register_map=\"0.1\"}}", env!("CARGO_PKG_VERSION"))),
+            "1"
+        );
+        // Latencies 0.5, 3, 7, 40, 2000 ms.
+        let l = "fme_frame_to_register_latency_seconds";
+        for (le, n) in [("0.005", "2"), ("0.01", "3"), ("0.05", "4"), ("1", "4"), ("+Inf", "5")] {
+            assert_eq!(value(&t, &format!("{l}_bucket{{le=\"{le}\"}}")), n, "le {le}");
+        }
+        assert_eq!(value(&t, &format!("{l}_count")), "5");
+        assert_eq!(value(&t, &format!("{l}_sum")), "2.0505");
+    }
+
+    #[test]
+    fn a_stale_value_is_nan_and_no_fish() {
+        let mut snap = snapshot();
+        snap.health.last_sample_at = snap.now.checked_sub(Duration::from_secs(6));
+        let t = render(&snap);
+        assert_eq!(value(&t, "fme_activity_mean_meters_per_second"), "NaN");
+        assert_eq!(value(&t, "fme_activity_smoothed_meters_per_second"), "NaN");
+        assert_eq!(value(&t, "fme_fish"), "0");
+        snap.health.last_sample_at = None;
+        assert_eq!(value(&render(&snap), "fme_activity_age_seconds"), "+Inf");
+    }
+
+    #[test]
+    fn routes() {
+        let r = |s: &str| route(s.as_bytes());
+        assert_eq!(r("GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n"), Route::Metrics { head: false });
+        assert_eq!(r("GET /metrics?x=1 HTTP/1.0\n\n"), Route::Metrics { head: false });
+        assert_eq!(r("HEAD /metrics HTTP/1.1\r\n\r\n"), Route::Metrics { head: true });
+        assert_eq!(r("POST /metrics HTTP/1.1\r\n\r\n"), Route::Error(405));
+        assert_eq!(r("DELETE /metrics HTTP/1.1\r\n\r\n"), Route::Error(405));
+        assert_eq!(r("GET / HTTP/1.1\r\n\r\n"), Route::Error(404));
+        assert_eq!(r("GET /metricsx HTTP/1.1\r\n\r\n"), Route::Error(404));
+        assert_eq!(r("POST /other HTTP/1.1\r\n\r\n"), Route::Error(404));
+        for bad in [
+            "",
+            "\r\n\r\n",
+            "GET\r\n\r\n",
+            "GET /metrics\r\n\r\n",
+            "GET /metrics HTTP/2\r\n\r\n",
+            "get /metrics HTTP/1.1\r\n\r\n",
+            "GET metrics HTTP/1.1\r\n\r\n",
+            "GET  /metrics HTTP/1.1\r\n\r\n",
+            "GET /metrics HTTP/1.1 x\r\n\r\n",
+        ] {
+            assert_eq!(r(bad), Route::Error(400), "{bad:?}");
+        }
+        assert_eq!(route(b"GET /\xff\xfe HTTP/1.1\r\n\r\n"), Route::Error(400));
+    }
+
+    #[test]
+    fn head_end_across_reads() {
+        assert_eq!(head_end(b"GET / HTTP/1.1\r\n\r\nrest", 0), Some(18));
+        assert_eq!(head_end(b"GET / HTTP/1.1\r\n\r\n", 17), Some(18), "terminator split over two reads");
+        assert_eq!(head_end(b"GET / HTTP/1.1\n\n", 0), Some(16));
+        assert_eq!(head_end(b"GET / HTTP/1.1\r\n", 0), None);
+    }
+
+    #[tokio::test]
+    async fn oversized_and_truncated_heads() {
+        let mut buf = Box::new([0u8; MAX_HEAD]);
+        let big = vec![b'A'; MAX_HEAD + 10];
+        assert_eq!(read_head(&mut big.as_slice(), &mut buf).await, Head::TooLarge);
+        assert_eq!(read_head(&mut &b"GET /metrics HTTP/1.1\r\n"[..], &mut buf).await, Head::Closed);
+        assert_eq!(read_head(&mut &b"GET /metrics HTTP/1.1\r\n\r\n"[..], &mut buf).await, Head::Complete(25));
+    }
+
+    /// Connects from `ip` (any 127/8 address reaches a loopback listener on Linux).
+    async fn connect_from(ip: [u8; 4], to: SocketAddr) -> tokio::net::TcpStream {
+        let sock = tokio::net::TcpSocket::new_v4().expect("socket");
+        sock.bind(SocketAddr::from((ip, 0))).expect("bind source");
+        sock.connect(to).await.expect("connect")
+    }
+
+    /// Whether the server closes `s` without an answer (after a complete request).
+    async fn closed_unanswered(mut s: tokio::net::TcpStream) -> bool {
+        let _ = s.write_all(b"GET /metrics HTTP/1.1\r\n\r\n").await;
+        let mut buf = Vec::new();
+        let r = tokio::time::timeout(Duration::from_secs(5), s.read_to_end(&mut buf)).await;
+        matches!(r, Ok(Ok(0)) | Ok(Err(_)))
+    }
+
+    #[tokio::test]
+    async fn connection_limits_per_peer_and_in_all() {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let addr = listener.local_addr().expect("addr");
+        let shared = Arc::new(Shared::new(String::new(), 16));
+        let ctx =
+            Ctx { shared: shared.clone(), bank: Arc::new(RegisterBank::new()), stale_after: Duration::from_secs(5) };
+        let (stop, rx) = tokio::sync::oneshot::channel::<()>();
+        let server = tokio::spawn(serve(listener, AllowList::default(), ctx, async move {
+            let _ = rx.await;
+        }));
+        // One address: MAX_PER_PEER held open, the next one from it is refused.
+        let mut held = Vec::new();
+        for _ in 0..MAX_PER_PEER {
+            held.push(connect_from([127, 0, 0, 1], addr).await);
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        assert!(closed_unanswered(connect_from([127, 0, 0, 1], addr).await).await, "per-address limit");
+        // Another address still gets in, up to the total.
+        for _ in 0..MAX_CONNECTIONS - MAX_PER_PEER {
+            held.push(connect_from([127, 0, 0, 2], addr).await);
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        assert!(closed_unanswered(connect_from([127, 0, 0, 3], addr).await).await, "total limit");
+        assert_eq!(shared.metrics.refused.load(Ordering::Relaxed), 2);
+        // Freed slots serve again.
+        drop(held);
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        let mut s = connect_from([127, 0, 0, 3], addr).await;
+        s.write_all(b"GET /metrics HTTP/1.1\r\n\r\n").await.expect("write");
+        let mut buf = Vec::new();
+        let _ = tokio::time::timeout(Duration::from_secs(5), s.read_to_end(&mut buf)).await;
+        assert!(buf.starts_with(b"HTTP/1.1 200 OK\r\n"), "{}", String::from_utf8_lossy(&buf));
+        assert_eq!(shared.metrics.aborted.load(Ordering::Relaxed), 8, "the held connections");
+        let _ = stop.send(());
+        let _ = server.await;
+    }
+
+    #[tokio::test]
+    async fn allow_list_refuses_others() {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let addr = listener.local_addr().expect("addr");
+        let shared = Arc::new(Shared::new(String::new(), 16));
+        let ctx =
+            Ctx { shared: shared.clone(), bank: Arc::new(RegisterBank::new()), stale_after: Duration::from_secs(5) };
+        let allow = AllowList::parse(&["127.0.0.2".into()]).expect("allow");
+        let (stop, rx) = tokio::sync::oneshot::channel::<()>();
+        let server = tokio::spawn(serve(listener, allow, ctx, async move {
+            let _ = rx.await;
+        }));
+        assert!(closed_unanswered(connect_from([127, 0, 0, 1], addr).await).await);
+        assert!(!closed_unanswered(connect_from([127, 0, 0, 2], addr).await).await);
+        assert_eq!(shared.metrics.refused.load(Ordering::Relaxed), 1);
+        let _ = stop.send(());
+        let _ = server.await;
+    }
+
+    #[test]
+    fn responses_carry_length_and_type() {
+        let r = String::from_utf8(response(200, "abc\n", false)).unwrap_or_default();
+        assert!(r.starts_with("HTTP/1.1 200 OK\r\n"), "{r}");
+        assert!(r.contains("Content-Type: text/plain; version=0.0.4; charset=utf-8\r\n"), "{r}");
+        assert!(r.contains("Content-Length: 4\r\n") && r.ends_with("\r\n\r\nabc\n"), "{r}");
+        let h = String::from_utf8(response(200, "abc\n", true)).unwrap_or_default();
+        assert!(h.contains("Content-Length: 4\r\n") && h.ends_with("\r\n\r\n"), "HEAD: no body: {h}");
+        let e = String::from_utf8(response(405, "no\n", false)).unwrap_or_default();
+        assert!(e.starts_with("HTTP/1.1 405 Method Not Allowed\r\n") && e.contains("Allow: GET, HEAD\r\n"), "{e}");
+    }
+}
