@@ -24,7 +24,7 @@ use super::registers::{self, BLOCK_LEN, status};
 use crate::backoff::Backoff;
 use crate::config::MetricsConfig;
 use crate::config::allow::AllowList;
-use crate::status::{Health, MetricsStatus, Shared};
+use crate::status::{Health, MetricsStatus, MqttLink, Shared};
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::net::{IpAddr, SocketAddr};
@@ -440,6 +440,33 @@ pub fn families(s: &Snapshot, e: &mut Exposition) {
     e.gauge("fme_record_ring_frames", "Frames in the black-box ring.", r.ring_frames as f64);
     e.counter("fme_record_saved_total", "Frozen recordings written.", r.saved);
     e.counter("fme_record_snapshots_total", "Snapshots written.", r.snapshots);
+
+    // MQTT telemetry (docs/mqtt.md).
+    let q = &h.mqtt;
+    let links = [MqttLink::Disabled, MqttLink::Connecting, MqttLink::Connected, MqttLink::AuthFailed];
+    let states: Vec<(&str, f64)> = links.iter().map(|l| (l.name(), b(q.link == *l))).collect();
+    e.gauge_by("fme_mqtt_link", "MQTT link state: 1 for the current one.", "state", &states);
+    e.gauge("fme_mqtt_queued_messages", "MQTT messages waiting in the queue.", q.queued as f64);
+    e.counter(
+        "fme_mqtt_published_total",
+        "MQTT messages acknowledged by the broker (QoS 1) or written to it (QoS 0).",
+        q.published,
+    );
+    e.counter(
+        "fme_mqtt_delivered_after_reconnect_total",
+        "MQTT messages delivered after waiting in the queue for the broker.",
+        q.delivered_after_reconnect,
+    );
+    e.counter("fme_mqtt_dropped_total", "MQTT messages dropped: the queue was full (oldest first).", q.dropped);
+    e.counter("fme_mqtt_reconnects_total", "MQTT connections made after the first one.", q.reconnects);
+    e.counter("fme_mqtt_connect_attempts_total", "MQTT connection attempts.", q.connect_attempts);
+    e.counter(
+        "fme_mqtt_auth_failures_total",
+        "MQTT connection attempts refused for the login or the certificate (status bit 9).",
+        q.auth_failures,
+    );
+    let age = q.last_publish_unix_ms.map_or(f64::NAN, |t| (crate::history::now_unix_ms() - t).max(0) as f64 / 1000.0);
+    e.gauge("fme_mqtt_last_publish_age_seconds", "Time since the last acknowledged MQTT message, s (NaN: never).", age);
 
     // This endpoint.
     let (codes, refused, aborted) = &s.http;

@@ -128,6 +128,11 @@ const EXPECTED: &[(&str, &str)] = &[
     ("fme_record_frames_written_total", "counter"),
     ("fme_metrics_http_responses_total", "counter"),
     ("fme_metrics_connections_refused_total", "counter"),
+    ("fme_mqtt_link", "gauge"),
+    ("fme_mqtt_queued_messages", "gauge"),
+    ("fme_mqtt_published_total", "counter"),
+    ("fme_mqtt_dropped_total", "counter"),
+    ("fme_mqtt_reconnects_total", "counter"),
 ];
 
 /// One FC04 read of 24 registers over raw Modbus TCP; whether it was answered.
