@@ -11,12 +11,16 @@
 //! `FME_BENCH_RECORD=1`: the real-time phase alternately without and with the black box
 //! (`[record]` defaults), `FME_BENCH_RECORD_ROUNDS` (default 2) times each, with the cost as ratios
 //! and the disk use per hour (docs/recording.md); `FME_BENCH_FAST_FRAMES=0` skips the fast phase.
+//! `FME_BENCH_TELEMETRY=1`: likewise without and with the fleet telemetry: `[output.mqtt]` publishing
+//! to a Mosquitto this bench starts on a free loopback port (`make setup` installs it) and
+//! `[output.metrics]` scraped once a second (docs/mqtt.md, docs/metrics.md).
 //! Run without `--bench` (as `cargo test --all-targets` does) it only smoke-runs: 3 s and 300 frames.
 
 use fme::capture::{FrameSource, RecordedSource};
 use fme::config::{Config, ModbusMode};
 use fme::service::{self, Daemon, RunOptions};
 use std::path::Path;
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 use tokio_modbus::prelude::*;
 
@@ -58,6 +62,17 @@ fn env_num(key: &str, default: u64) -> u64 {
     std::env::var(key).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
 }
 
+fn mqtt_line(h: &fme::status::Health) -> String {
+    let m = &h.mqtt;
+    if m.broker.is_empty() {
+        return "off".into();
+    }
+    format!(
+        "{:?} published {} queued {} dropped {} reconnects {}",
+        m.link, m.published, m.queued, m.dropped, m.reconnects
+    )
+}
+
 /// One real-time run's figures.
 struct Realtime {
     line: String,
@@ -68,12 +83,91 @@ struct Realtime {
     frames_in_ring: u64,
 }
 
-/// Phase 1: `secs` of real-time replay with a polling PLC; `state`: record into this state directory.
-async fn realtime(seq: &Path, secs: u64, state: Option<&Path>) -> Realtime {
+/// What a real-time run adds to the plain pipeline.
+#[derive(Clone, Copy)]
+enum Extra<'a> {
+    None,
+    /// Record into this state directory.
+    Record(&'a Path),
+    /// MQTT to this loopback port, and the metrics endpoint scraped once a second.
+    Telemetry(u16),
+}
+
+/// A Mosquitto on a free loopback port, killed on drop.
+struct Broker {
+    child: Child,
+    port: u16,
+    _dir: tempfile::TempDir,
+}
+
+impl Broker {
+    fn start() -> Broker {
+        let path = std::env::var_os("PATH").unwrap_or_default();
+        let exe = std::env::split_paths(&path)
+            .map(|d| d.join("mosquitto"))
+            .chain(["/usr/sbin", "/usr/local/sbin", "/usr/bin"].map(|d| Path::new(d).join("mosquitto")))
+            .find(|p| p.is_file())
+            .unwrap_or_else(|| {
+                eprintln!("daemon_replay: mosquitto not found on PATH or in /usr/sbin: run `make setup`");
+                std::process::exit(2)
+            });
+        let dir = tempfile::tempdir().expect("tempdir");
+        let port =
+            std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("port");
+        let conf = dir.path().join("mosquitto.conf");
+        std::fs::write(&conf, format!("listener {port} 127.0.0.1\nallow_anonymous true\nuser root\n")).expect("conf");
+        let child = Command::new(exe)
+            .arg("-c")
+            .arg(&conf)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("mosquitto");
+        let end = Instant::now() + Duration::from_secs(10);
+        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(Instant::now() < end, "mosquitto did not start");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        Broker { child, port, _dir: dir }
+    }
+}
+
+impl Drop for Broker {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// One scrape of the metrics endpoint: the body's length, 0 on any failure.
+async fn scrape(addr: std::net::SocketAddr) -> usize {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let Ok(mut s) = tokio::net::TcpStream::connect(addr).await else { return 0 };
+    if s.write_all(b"GET /metrics HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n").await.is_err() {
+        return 0;
+    }
+    let mut buf = Vec::new();
+    let _ = s.read_to_end(&mut buf).await;
+    let text = String::from_utf8_lossy(&buf);
+    if !text.starts_with("HTTP/1.1 200") {
+        return 0;
+    }
+    text.split_once("\r\n\r\n").map_or(0, |(_, body)| body.len())
+}
+
+/// Phase 1: `secs` of real-time replay with a polling PLC, with `extra`.
+async fn realtime(seq: &Path, secs: u64, extra: Extra<'_>) -> Realtime {
     let mut cfg = config(seq);
-    match state {
-        Some(dir) => cfg.service.state_dir = dir.to_path_buf(),
-        None => cfg.record.enabled = false,
+    match extra {
+        Extra::Record(dir) => cfg.service.state_dir = dir.to_path_buf(),
+        Extra::None => cfg.record.enabled = false,
+        Extra::Telemetry(port) => {
+            cfg.record.enabled = false;
+            cfg.output.mqtt.enabled = true;
+            cfg.output.mqtt.broker = format!("127.0.0.1:{port}");
+            cfg.output.mqtt.box_id = "bench".into();
+            cfg.output.metrics.listen = "127.0.0.1:0".into();
+        }
     }
     let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(seq, true, true).expect("open"));
     let pipe = service::build_pipeline(&cfg).expect("pipeline");
@@ -84,10 +178,18 @@ async fn realtime(seq: &Path, secs: u64, state: Option<&Path>) -> Realtime {
     let t0 = Instant::now();
     let mut warm: Option<(u64, u64, f64, Instant)> = None;
     let mut polls = 0u32;
+    let (mut scrapes, mut scrape_bytes, mut next_scrape) = (0u32, 0usize, t0);
+    let metrics = daemon.metrics_addr();
     while t0.elapsed() < Duration::from_secs(secs) {
         tokio::time::sleep(Duration::from_millis(100)).await;
         if plc.read_input_registers(0, 24).await.is_ok_and(|r| r.is_ok()) {
             polls += 1;
+        }
+        if let Some(addr) = metrics.filter(|_| next_scrape.elapsed() >= Duration::ZERO) {
+            next_scrape += Duration::from_secs(1);
+            let n = scrape(addr).await;
+            scrapes += u32::from(n > 0);
+            scrape_bytes = scrape_bytes.max(n);
         }
         if warm.is_none() && t0.elapsed() >= warmup {
             let hh = shared.health();
@@ -101,7 +203,8 @@ async fn realtime(seq: &Path, secs: u64, state: Option<&Path>) -> Realtime {
     let line = format!(
         "realtime {secs} s: captured {} processed {} dropped after {}s warm-up: {} (total {}); processed {:.1} fps; \
          latency frame->register p50 {:?} ms p99 {:?} ms max {:.1} ms over {} updates; cpu {cpu_pct:.0}% of one core; \
-         rss {} kB (peak {} kB); plc polls ok {polls}; recorder written {} dropped {} ring {} frames {} bytes",
+         rss {} kB (peak {} kB); plc polls ok {polls}; recorder written {} dropped {} ring {} frames {} bytes; \
+         metrics scrapes ok {scrapes} (body {scrape_bytes} B); mqtt {}",
         hh.frames_captured,
         hh.frames_processed,
         warmup.as_secs(),
@@ -118,6 +221,7 @@ async fn realtime(seq: &Path, secs: u64, state: Option<&Path>) -> Realtime {
         hh.record.frames_dropped,
         hh.record.ring_frames,
         hh.record.ring_bytes,
+        mqtt_line(&hh),
     );
     daemon.shutdown().await;
     Realtime {
@@ -140,19 +244,28 @@ async fn main() {
     // directory), FME_BENCH_RECORD_ROUNDS (default 2) times each, and the ratios.
     let bench_mode = std::env::args().any(|a| a == "--bench");
     let secs = env_num("FME_BENCH_REALTIME_S", if bench_mode { 20 } else { 3 });
-    if env_num("FME_BENCH_RECORD", 0) == 1 {
+    let record = env_num("FME_BENCH_RECORD", 0) == 1;
+    let telemetry = env_num("FME_BENCH_TELEMETRY", 0) == 1;
+    if record || telemetry {
+        let what = if record { "record" } else { "telemetry" };
+        let broker = telemetry.then(Broker::start);
         let rounds = env_num("FME_BENCH_RECORD_ROUNDS", 2);
         let mut sums = [[0.0f64; 3]; 2];
         let mut bytes_per_frame = 0.0;
         for round in 0..rounds {
-            for (i, record) in [false, true].into_iter().enumerate() {
+            for (i, on) in [false, true].into_iter().enumerate() {
                 let state = tempfile::tempdir().expect("tempdir");
-                let r = realtime(&seq, secs, record.then_some(state.path())).await;
-                println!("round {round} record {record}: {}", r.line);
+                let extra = match (on, &broker) {
+                    (false, _) => Extra::None,
+                    (true, Some(b)) => Extra::Telemetry(b.port),
+                    (true, None) => Extra::Record(state.path()),
+                };
+                let r = realtime(&seq, secs, extra).await;
+                println!("round {round} {what} {on}: {}", r.line);
                 for (k, v) in [r.cpu_pct, r.p50_ms, r.p99_ms].into_iter().enumerate() {
                     sums[i][k] += v;
                 }
-                if record && r.frames_in_ring > 0 {
+                if on && r.frames_in_ring > 0 {
                     bytes_per_frame = r.ring_bytes as f64 / r.frames_in_ring as f64;
                 }
             }
@@ -160,7 +273,7 @@ async fn main() {
         let n = rounds.max(1) as f64;
         let [off, on] = sums.map(|s| s.map(|v| v / n));
         println!(
-            "record cost over {rounds} rounds of {secs} s: cpu {:.1}% -> {:.1}% of one core (x{:.3}); latency p50 {:.0} -> {:.0} ms (x{:.3}), p99 {:.0} -> {:.0} ms (x{:.3})",
+            "{what} cost over {rounds} rounds of {secs} s: cpu {:.1}% -> {:.1}% of one core (x{:.3}); latency p50 {:.0} -> {:.0} ms (x{:.3}), p99 {:.0} -> {:.0} ms (x{:.3})",
             off[0],
             on[0],
             on[0] / off[0],
@@ -171,16 +284,18 @@ async fn main() {
             on[2],
             on[2] / off[2]
         );
-        let d = fme::config::RecordConfig::default();
-        println!(
-            "disk: {bytes_per_frame:.0} bytes/frame; at 30 fps the ring writes {:.2} GB/hour and holds {:.0} MB (ring_s {} s, cap {} MB)",
-            bytes_per_frame * 30.0 * 3600.0 / 1e9,
-            (bytes_per_frame * 30.0 * d.ring_s / 1e6).min(d.max_disk_mb as f64),
-            d.ring_s,
-            d.max_disk_mb
-        );
+        if record {
+            let d = fme::config::RecordConfig::default();
+            println!(
+                "disk: {bytes_per_frame:.0} bytes/frame; at 30 fps the ring writes {:.2} GB/hour and holds {:.0} MB (ring_s {} s, cap {} MB)",
+                bytes_per_frame * 30.0 * 3600.0 / 1e9,
+                (bytes_per_frame * 30.0 * d.ring_s / 1e6).min(d.max_disk_mb as f64),
+                d.ring_s,
+                d.max_disk_mb
+            );
+        }
     } else {
-        println!("{}", realtime(&seq, secs, None).await.line);
+        println!("{}", realtime(&seq, secs, Extra::None).await.line);
     }
 
     // Phase 2: as fast as possible, many frames, memory sampled along the way.
