@@ -1,3 +1,4 @@
+#![cfg(feature = "ort")]
 //! A missing ONNX Runtime library is a clear error, not a panic. Its own test binary, because once
 //! a process has loaded the library it stays loaded.
 
