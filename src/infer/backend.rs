@@ -229,7 +229,8 @@ impl Model {
             Inner::Tract(g) => {
                 let out = g.run(shape, input).map_err(run_err)?;
                 let dims: Vec<i64> = out.shape().iter().map(|&d| d as i64).collect();
-                let data = out.as_slice::<f32>().map_err(|e| run_err(format!("output is not float32: {e}")))?;
+                let view = out.try_as_plain_ram().map_err(|e| run_err(format!("output: {e:#}")))?;
+                let data = view.as_slice::<f32>().map_err(|e| run_err(format!("output is not float32: {e:#}")))?;
                 read(&dims, data)
             }
         }
@@ -282,6 +283,7 @@ mod tract {
     use std::path::Path;
 
     use tract_onnx::prelude::*;
+    use tract_onnx::tract_hir::infer::Factoid;
 
     use super::{Inner, Model, Outlet};
     use crate::infer::InferError;

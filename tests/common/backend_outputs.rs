@@ -342,16 +342,16 @@ pub struct Bounds {
 pub fn check(what: &str, p: &Parity, b: &Bounds) {
     eprintln!("{what}: {p}");
     let mut missed = Vec::new();
-    if !(p.mean_iou >= b.mean_iou) {
+    if p.mean_iou.is_nan() || p.mean_iou < b.mean_iou {
         missed.push(format!("mean IoU {:.5} < {}", p.mean_iou, b.mean_iou));
     }
-    if !(p.count_diff() <= b.count_diff) {
+    if p.count_diff() > b.count_diff {
         missed.push(format!("detection counts differ by {:.2}% > {}%", 100.0 * p.count_diff(), 100.0 * b.count_diff));
     }
-    if !(p.depth_r >= b.depth_r) {
+    if p.depth_r.is_nan() || p.depth_r < b.depth_r {
         missed.push(format!("depth Pearson r {:.6} < {}", p.depth_r, b.depth_r));
     }
-    if !(p.activity_rmse <= b.activity_rmse) {
+    if p.activity_rmse.is_nan() || p.activity_rmse > b.activity_rmse {
         missed.push(format!("activity RMSE {:.3}% > {}%", 100.0 * p.activity_rmse, 100.0 * b.activity_rmse));
     }
     if p.activity_only_one > b.activity_only_one {
