@@ -52,9 +52,12 @@ test: setup
 fmt:
 	$(CARGO) fmt --all
 
+# The second clippy lints the static build's code paths (feature tract, no ONNX Runtime): about a
+# minute more, the dependencies' checks are shared with the first.
 lint: setup
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --locked --all-targets -- -D warnings
+	$(CARGO) clippy --locked --no-default-features --features tract,embed-models --all-targets -- -D warnings
 
 # The main job on the bundled recording and models: `fme run` (detector + tracker + depth + eq. 1-5) with a
 # Modbus TCP server on 127.0.0.1:5020 and a live one-line view, then `fme eval` of the same models against
