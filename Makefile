@@ -33,15 +33,17 @@ static-copy:
 	@ls -l target/static/fme
 
 # The static binary checked (CI runs it after `make test`): ldd, the bundled recording from an empty
-# directory (scripts/static_check.sh), and tract's parity with ONNX Runtime (tests/backend_parity.rs,
-# against the reference tests/backend_reference.rs keeps). The binary is built by the parity test's
+# directory (scripts/static_check.sh), tract's parity with ONNX Runtime (tests/backend_parity.rs,
+# against the reference tests/backend_reference.rs keeps), and the unit and model tests under tract
+# (eval_recorded runs the static binary itself). The binary is built by the parity test's
 # build: cargo unifies the dev-dependencies' features into a test build, so a separate `cargo build`
 # would compile most dependencies twice. Same sources, features and flags as `make static`.
+STATIC_TESTS := --lib --test backend_parity --test infer_onnx --test pipeline_e2e --test eval_recorded
 static-check: setup
-	$(STATIC_CARGO) test $(STATIC_FLAGS) --test backend_parity --no-run
+	$(STATIC_CARGO) test $(STATIC_FLAGS) $(STATIC_TESTS) --no-run
 	@$(MAKE) --no-print-directory static-copy
 	bash scripts/static_check.sh target/static/fme
-	$(STATIC_CARGO) test $(STATIC_FLAGS) --test backend_parity
+	$(STATIC_CARGO) test $(STATIC_FLAGS) $(STATIC_TESTS)
 
 # Unit, integration and doc tests. Benchmarks are built by `make lint` (clippy --all-targets) but
 # only run by `make bench`: a benchmark measures speed, it is not a test.

@@ -193,7 +193,8 @@ impl Model {
     }
 
     /// Fixes the input shape the model will be run with (tract plans and optimises the graph for
-    /// it here, so a graph it cannot run fails at start-up; ONNX Runtime needs nothing).
+    /// it here, so a graph it cannot run fails at start-up, and learns the outputs' shapes; ONNX
+    /// Runtime needs nothing). Call it before reading [`Self::outputs`].
     pub fn set_input_shape(&mut self, path: &Path, shape: [usize; 4]) -> Result<(), InferError> {
         match &mut self.inner {
             #[cfg(feature = "ort")]
@@ -202,7 +203,16 @@ impl Model {
                 Ok(())
             }
             #[cfg(feature = "tract")]
-            Inner::Tract(g) => g.plan(shape).map_err(|e| InferError::ModelFile { path: path.to_path_buf(), reason: e }),
+            Inner::Tract(g) => {
+                let model_err = |reason: String| InferError::ModelFile { path: path.to_path_buf(), reason };
+                g.plan(shape).map_err(model_err)?;
+                // An ONNX file need not declare its outputs' shapes: take them from the analysed graph.
+                let planned = g.outputs().map_err(model_err)?;
+                for (o, shape) in self.outputs.iter_mut().zip(planned) {
+                    o.shape = shape;
+                }
+                Ok(())
+            }
         }
     }
 
@@ -308,27 +318,7 @@ mod tract {
         };
         let inputs = model.inputs.iter().map(outlet).collect::<Result<Vec<_>, _>>()?;
         let outputs = model.outputs.iter().map(outlet).collect::<Result<Vec<_>, _>>()?;
-        let mut graph = Graph { model: Some(model), plan: None };
-        // A model whose input shape is fully known is planned now; its output facts then come from
-        // the analysed graph (an ONNX file need not declare output shapes).
-        let known =
-            inputs.first().and_then(|i| i.shape.as_ref().ok()).filter(|s| s.len() == 4 && s.iter().all(|&d| d > 0));
-        let mut outputs = outputs;
-        if let Some(s) = known.cloned() {
-            let shape = [s[0] as usize, s[1] as usize, s[2] as usize, s[3] as usize];
-            graph.plan(shape).map_err(model_err)?;
-            if let Some((_, plan)) = &graph.plan {
-                outputs = (0..plan.model().outputs.len())
-                    .map(|ix| {
-                        let fact = plan.model().output_fact(ix).map_err(|e| model_err(format!("{e:#}")))?;
-                        Ok(Outlet {
-                            name: outputs.get(ix).map_or_else(String::new, |o| o.name.clone()),
-                            shape: typed_shape(fact),
-                        })
-                    })
-                    .collect::<Result<Vec<_>, InferError>>()?;
-            }
-        }
+        let graph = Graph { model: Some(model), plan: None };
         Ok(Model { inner: Inner::Tract(graph), inputs, outputs })
     }
 
@@ -373,6 +363,17 @@ mod tract {
             Ok(())
         }
 
+        /// The planned graph's output shapes.
+        pub(super) fn outputs(&self) -> Result<Vec<Result<Vec<i64>, String>>, String> {
+            let Some((_, plan)) = &self.plan else {
+                return Err("the graph is not planned".into());
+            };
+            let model = plan.model();
+            (0..model.outputs.len())
+                .map(|ix| model.output_fact(ix).map(typed_shape).map_err(|e| format!("{e:#}")))
+                .collect()
+        }
+
         /// Runs the planned graph on `input`; returns the first output.
         pub(super) fn run(&mut self, shape: [usize; 4], input: &[f32]) -> Result<TValue, String> {
             self.plan(shape)?;
@@ -385,6 +386,47 @@ mod tract {
                 return Err("the graph has no output".into());
             }
             Ok(out.swap_remove(0))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn version_names_the_backend_and_the_models() {
+        assert!(VERSION.starts_with(env!("CARGO_PKG_VERSION")), "{VERSION}");
+        assert!(VERSION.contains(BUILD) && BUILD.contains(Backend::DEFAULT.name()), "{VERSION}");
+        assert_eq!(BUILD.contains("models embedded"), !super::super::embedded::MODELS.is_empty(), "{BUILD}");
+        assert_eq!(Backend::ALL.first(), Some(&Backend::DEFAULT));
+    }
+
+    #[test]
+    fn a_missing_model_file_is_named() {
+        let e = model_bytes(Path::new("/nonexistent/fme/det.onnx")).unwrap_err().to_string();
+        assert!(e.contains("/nonexistent/fme/det.onnx") && e.contains("cannot read"), "{e}");
+        let dir = tempfile::tempdir().expect("tempdir");
+        let empty = dir.path().join("empty.onnx");
+        std::fs::write(&empty, b"").expect("write");
+        let e = model_bytes(&empty).unwrap_err().to_string();
+        assert!(e.contains("empty.onnx") && e.contains("empty"), "{e}");
+    }
+
+    #[test]
+    fn a_file_that_is_not_onnx_is_refused_by_every_backend() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let junk = dir.path().join("junk.onnx");
+        std::fs::write(&junk, b"this is not a protobuf").expect("write");
+        for &b in Backend::ALL {
+            match Model::open(&junk, SessionOptions::default(), b) {
+                Err(InferError::ModelFile { path, reason }) => {
+                    assert_eq!(path, junk);
+                    assert!(reason.contains("not a loadable ONNX model"), "{b}: {reason}");
+                }
+                Err(InferError::Library { .. }) => {} // ONNX Runtime not installed: named elsewhere.
+                other => panic!("{b}: {other:?}"),
+            }
         }
     }
 }

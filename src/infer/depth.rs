@@ -133,8 +133,7 @@ impl DepthNet {
         cfg.validate()?;
         let path = cfg.model.clone();
         let mut model = Model::open(&path, opts, backend)?;
-        let net = check_layout(&path, &model, cfg)?;
-        model.set_input_shape(&path, [1, 3, net.1 as usize, net.0 as usize])?;
+        let net = check_layout(&path, &mut model, cfg)?;
         let plane = net.0 as usize * net.1 as usize;
         Ok(Self {
             model,
@@ -248,7 +247,7 @@ impl DepthNet {
     }
 }
 
-fn check_layout(path: &Path, model: &Model, cfg: &DepthConfig) -> Result<(u32, u32), InferError> {
+fn check_layout(path: &Path, model: &mut Model, cfg: &DepthConfig) -> Result<(u32, u32), InferError> {
     let shape_err = |what: &str, expected: &str, actual: String| InferError::Shape {
         path: path.to_path_buf(),
         what: what.to_string(),
@@ -265,6 +264,8 @@ fn check_layout(path: &Path, model: &Model, cfg: &DepthConfig) -> Result<(u32, u
         return Err(shape_err(&what, "[1, 3, H, W] (RGB, NCHW)", fmt_shape(&dims)));
     }
     let net = resolve_size(path, &what, &dims[2..4], cfg.input_size, "depth.input_size")?;
+    // The outputs' shapes are known once the input's is (tract plans the graph for it here).
+    model.set_input_shape(path, [1, 3, net.1 as usize, net.0 as usize])?;
     let Some(output) = model.outputs().first() else {
         return Err(shape_err("outputs", "1 output `[1, H, W]`", "none".into()));
     };

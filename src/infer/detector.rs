@@ -58,8 +58,7 @@ impl Detector {
         cfg.validate()?;
         let path = cfg.model.clone();
         let mut model = Model::open(&path, opts, backend)?;
-        let (net, nc) = check_layout(&path, &model, cfg)?;
-        model.set_input_shape(&path, [1, 3, net.1 as usize, net.0 as usize])?;
+        let (net, nc) = check_layout(&path, &mut model, cfg)?;
         let plane = net.0 as usize * net.1 as usize;
         Ok(Self {
             model,
@@ -157,7 +156,7 @@ impl Detector {
 }
 
 /// Checks the model's I/O against the convention; returns the input `(w, h)` and class count.
-fn check_layout(path: &Path, model: &Model, cfg: &DetectorConfig) -> Result<((u32, u32), usize), InferError> {
+fn check_layout(path: &Path, model: &mut Model, cfg: &DetectorConfig) -> Result<((u32, u32), usize), InferError> {
     let shape_err = |what: &str, expected: String, actual: String| InferError::Shape {
         path: path.to_path_buf(),
         what: what.to_string(),
@@ -175,6 +174,8 @@ fn check_layout(path: &Path, model: &Model, cfg: &DetectorConfig) -> Result<((u3
         return Err(shape_err(&what, "[1, 3, H, W] (RGB, NCHW)".into(), fmt_shape(&dims)));
     }
     let net = resolve_size(path, &what, &dims[2..4], cfg.input_size, "detector.input_size")?;
+    // The outputs' shapes are known once the input's is (tract plans the graph for it here).
+    model.set_input_shape(path, [1, 3, net.1 as usize, net.0 as usize])?;
     let Some(output) = model.outputs().first() else {
         return Err(shape_err("outputs", "1 output `[1, 4 + nc, N]`".into(), "none".into()));
     };
