@@ -4,7 +4,7 @@
 CARGO ?= cargo
 BIN := target/release/fme
 
-.PHONY: all setup build test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer bench-history bench-mqtt bench-anchors four-groups clean
+.PHONY: all setup build static static-copy static-check test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer bench-history bench-mqtt bench-backends bench-anchors four-groups clean
 
 all: build
 
@@ -13,6 +13,37 @@ setup:
 
 build: setup
 	$(CARGO) build --release --locked
+
+# One static executable (issue 36): the pure-Rust backend (tract) and the bundled models inside,
+# glibc's static-pie; nothing else needed beside it (docs/deployment.md#one-static-binary). For an
+# aarch64 board: STATIC_TARGET=aarch64-unknown-linux-gnu STRIP=aarch64-linux-gnu-strip with the
+# target's std and a cross linker (see there).
+STATIC_TARGET ?= x86_64-unknown-linux-gnu
+STRIP ?= strip
+STATIC_CARGO := RUSTFLAGS="$(RUSTFLAGS) -C target-feature=+crt-static" $(CARGO)
+STATIC_FLAGS := --release --locked --no-default-features --features tract,embed-models --target $(STATIC_TARGET)
+STATIC_BUILT = $(or $(CARGO_TARGET_DIR),target)/$(STATIC_TARGET)/release/fme
+static: setup
+	$(STATIC_CARGO) build $(STATIC_FLAGS) --bin fme
+	@$(MAKE) --no-print-directory static-copy
+static-copy:
+	mkdir -p target/static
+	cp $(STATIC_BUILT) target/static/fme
+	$(STRIP) target/static/fme
+	@ls -l target/static/fme
+
+# The static binary checked (CI runs it after `make test`): ldd, the bundled recording from an empty
+# directory (scripts/static_check.sh), tract's parity with ONNX Runtime (tests/backend_parity.rs,
+# against the reference tests/backend_reference.rs keeps), and the unit and model tests under tract
+# (eval_recorded runs the static binary itself). The binary is built by the parity test's
+# build: cargo unifies the dev-dependencies' features into a test build, so a separate `cargo build`
+# would compile most dependencies twice. Same sources, features and flags as `make static`.
+STATIC_TESTS := --lib --test backend_parity --test infer_onnx --test pipeline_e2e --test eval_recorded
+static-check: setup
+	$(STATIC_CARGO) test $(STATIC_FLAGS) $(STATIC_TESTS) --no-run
+	@$(MAKE) --no-print-directory static-copy
+	bash scripts/static_check.sh target/static/fme
+	$(STATIC_CARGO) test $(STATIC_FLAGS) $(STATIC_TESTS)
 
 # Unit, integration and doc tests. Benchmarks are built by `make lint` (clippy --all-targets) but
 # only run by `make bench`: a benchmark measures speed, it is not a test.
@@ -23,9 +54,12 @@ test: setup
 fmt:
 	$(CARGO) fmt --all
 
+# The second clippy lints the static build's code paths (feature tract, no ONNX Runtime): about a
+# minute more, the dependencies' checks are shared with the first.
 lint: setup
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --locked --all-targets -- -D warnings
+	$(CARGO) clippy --locked --no-default-features --features tract,embed-models --all-targets -- -D warnings
 
 # The main job on the bundled recording and models: `fme run` (detector + tracker + depth + eq. 1-5) with a
 # Modbus TCP server on 127.0.0.1:5020 and a live one-line view, then `fme eval` of the same models against
@@ -68,6 +102,10 @@ bench-mqtt: setup
 	$(CARGO) bench --locked --bench mqtt_fleet
 bench-infer: setup
 	$(CARGO) bench --locked --bench infer
+# ONNX Runtime against tract in one run: per-inference time of both networks (int8 and fp32) and the
+# pipeline's CPU at 30 fps, as ratios (docs/benchmarks.md#backends).
+bench-backends: setup
+	$(CARGO) bench --locked --features tract --bench backends
 # Issue 5's anchor models (YOLO11n) timed beside the bundled int8 files: this machine against the
 # anchors' (needs the ~6 GB Python stack of training/requirements.txt; not part of `bench`).
 bench-anchors:

@@ -5,7 +5,7 @@ use fme::cli;
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
-#[command(name = "fme", version, about = "Fish motion estimation: activity index for fish-farm PLCs")]
+#[command(name = "fme", version = fme::infer::backend::VERSION, about = "Fish motion estimation: activity index for fish-farm PLCs")]
 struct Cli {
     /// Log filter (tracing env-filter syntax), e.g. `info`, `fme=debug`. RUST_LOG overrides it.
     #[arg(long, global = true, default_value = "info")]

@@ -1,5 +1,6 @@
 //! A missing ONNX Runtime library is a clear error, not a panic. Its own test binary, because once
-//! a process has loaded the library it stays loaded.
+//! a process has loaded the library it stays loaded. ONNX Runtime's library lookup: only with the feature `ort`.
+#![cfg(feature = "ort")]
 
 use std::path::{Path, PathBuf};
 

@@ -65,7 +65,8 @@ fn detector_letterbox_padding_is_114_and_boxes_map_back() {
     let mean = (64.0 * 64.0 + 32.0 * 64.0 * 114.0 / 255.0) / (96.0 * 64.0);
     let d = det.detect(&frame, Seconds(0.0)).unwrap();
     assert_eq!(d.items.len(), 2);
-    assert!((d.items[0].score - 0.9 * mean).abs() < 1e-5, "{}", d.items[0].score);
+    // 1e-4: the runtimes sum the 18432 float32 inputs in different orders (tract is 5e-5 off).
+    assert!((d.items[0].score - 0.9 * mean).abs() < 1e-4, "{}", d.items[0].score);
     // Anchor 0 at input (15..25, 26..34) -> frame (-1..9, 26..34), clipped at the left edge.
     assert!(close(&d.items[0].bbox, &PixelBox::new(0.0, 26.0, 9.0, 8.0)), "{:?}", d.items[0].bbox);
     // Anchor 2 at input (64..76, 34..46) -> frame (48..60, 34..46), clipped to 64.

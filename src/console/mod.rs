@@ -175,7 +175,7 @@ pub fn mqtt_text(m: &crate::status::MqttHealth, now_ms: i64) -> String {
 const HELP: &str = "commands (case-insensitive; only snap and record save write, to the state directory):
   help            this list
   status          running state, status bits, fault, source, uptime
-  version         fme version and register-map version
+  version         fme version, register-map version and inference backend
   activity        last activity sample
   tracks          confirmed tracks
   calib           metric depth fit: scale/shift, residual, visible references
@@ -308,8 +308,12 @@ last {}",
             }
             ("version", None, _) => {
                 let (maj, min) = registers::version();
-                let _ =
-                    write!(body, "fme {} (register map {maj}.{min}, {BLOCK_LEN} registers)", env!("CARGO_PKG_VERSION"));
+                let _ = write!(
+                    body,
+                    "fme {} (register map {maj}.{min}, {BLOCK_LEN} registers; {})",
+                    env!("CARGO_PKG_VERSION"),
+                    crate::infer::backend::BUILD
+                );
                 Ok(())
             }
             ("activity", None, _) => {

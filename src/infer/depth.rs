@@ -6,14 +6,12 @@
 
 use std::path::{Path, PathBuf};
 
-use ort::session::Session;
-use ort::value::TensorRef;
-
 use super::InferError;
+use super::backend::{Backend, Model};
 use super::config::DepthConfig;
 use super::detector::resolve_size;
 use super::frame::{Normalize, Resampler, RgbFrame};
-use super::runtime::{SessionOptions, float_tensor_shape, fmt_shape, open_session};
+use super::runtime::{SessionOptions, fmt_shape};
 use crate::geometry::Pixel;
 use crate::units::Seconds;
 
@@ -101,7 +99,7 @@ impl RelDepthMap {
 
 /// A loaded depth network with its reusable buffers.
 pub struct DepthNet {
-    session: Session,
+    model: Model,
     path: PathBuf,
     net: (u32, u32),
     norm: Normalize,
@@ -115,20 +113,30 @@ pub struct DepthNet {
 
 impl std::fmt::Debug for DepthNet {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("DepthNet").field("path", &self.path).field("net", &self.net).finish()
+        f.debug_struct("DepthNet")
+            .field("path", &self.path)
+            .field("backend", &self.model.backend())
+            .field("net", &self.net)
+            .finish()
     }
 }
 
 impl DepthNet {
-    /// Loads `cfg.model` and checks that it follows the relative-depth convention.
+    /// Loads `cfg.model` with the build's default backend and checks that it follows the
+    /// relative-depth convention.
     pub fn open(cfg: &DepthConfig, opts: SessionOptions) -> Result<Self, InferError> {
+        Self::open_with(cfg, opts, Backend::DEFAULT)
+    }
+
+    /// As [`Self::open`], with the given backend.
+    pub fn open_with(cfg: &DepthConfig, opts: SessionOptions, backend: Backend) -> Result<Self, InferError> {
         cfg.validate()?;
         let path = cfg.model.clone();
-        let session = open_session(&path, opts)?;
-        let net = check_layout(&path, &session, cfg)?;
+        let mut model = Model::open(&path, opts, backend)?;
+        let net = check_layout(&path, &mut model, cfg)?;
         let plane = net.0 as usize * net.1 as usize;
         Ok(Self {
-            session,
+            model,
             path,
             net,
             norm: cfg.normalize(),
@@ -148,6 +156,10 @@ impl DepthNet {
     /// The model file.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+    /// The backend running the network.
+    pub fn backend(&self) -> Backend {
+        self.model.backend()
     }
 
     /// The map of the last successful [`Self::estimate`], until the next call; `None` before the first.
@@ -195,72 +207,70 @@ impl DepthNet {
     /// (`mirrored_mean == false`) or averages the mirrored output into the stored map.
     fn run(&mut self, mirrored_mean: bool) -> Result<(), InferError> {
         let (w, h) = (self.net.0 as usize, self.net.1 as usize);
-        let path = &self.path;
-        let run_err = |e: ort::Error| InferError::Run { path: path.clone(), reason: e.to_string() };
-        let tensor = TensorRef::from_array_view(([1usize, 3, h, w], &self.input[..])).map_err(run_err)?;
-        let outputs = self.session.run(ort::inputs![tensor]).map_err(run_err)?;
-        let (shape, data) = outputs[0].try_extract_tensor::<f32>().map_err(run_err)?;
-        let dims: Vec<i64> = shape.iter().copied().collect();
-        let (mh, mw) = match dims.as_slice() {
-            [1, h, w] | [1, 1, h, w] if *h > 0 && *w > 0 => (*h as u32, *w as u32),
-            _ => {
-                return Err(InferError::Shape {
-                    path: path.clone(),
-                    what: "output at run time".into(),
-                    expected: "[1, H, W] or [1, 1, H, W]".into(),
-                    actual: fmt_shape(&dims),
-                });
-            }
-        };
-        let m = &mut self.map;
-        if !mirrored_mean {
-            m.data.clear();
-            m.data.extend_from_slice(data);
-            m.width = mw;
-            m.height = mh;
-        } else {
-            // Same input size, so the same map size as the first run: a model that says otherwise
-            // is broken, and the unflipped map stays.
-            if (mw, mh) != (m.width, m.height) {
-                return Err(InferError::Shape {
-                    path: path.clone(),
-                    what: "output of the mirrored run".into(),
-                    expected: format!("a {}x{} map, as the first run", m.width, m.height),
-                    actual: fmt_shape(&dims),
-                });
-            }
-            for (dst, src) in m.data.chunks_exact_mut(mw as usize).zip(data.chunks_exact(mw as usize)) {
-                for (d, s) in dst.iter_mut().zip(src.iter().rev()) {
-                    *d = 0.5 * (*d + *s);
+        let (path, m) = (&self.path, &mut self.map);
+        self.model.run(path, [1, 3, h, w], &self.input, |dims, data| {
+            let (mh, mw) = match dims {
+                [1, h, w] | [1, 1, h, w] if *h > 0 && *w > 0 => (*h as u32, *w as u32),
+                _ => {
+                    return Err(InferError::Shape {
+                        path: path.clone(),
+                        what: "output at run time".into(),
+                        expected: "[1, H, W] or [1, 1, H, W]".into(),
+                        actual: fmt_shape(dims),
+                    });
+                }
+            };
+            if !mirrored_mean {
+                m.data.clear();
+                m.data.extend_from_slice(data);
+                m.width = mw;
+                m.height = mh;
+            } else {
+                // Same input size, so the same map size as the first run: a model that says
+                // otherwise is broken, and the unflipped map stays.
+                if (mw, mh) != (m.width, m.height) {
+                    return Err(InferError::Shape {
+                        path: path.clone(),
+                        what: "output of the mirrored run".into(),
+                        expected: format!("a {}x{} map, as the first run", m.width, m.height),
+                        actual: fmt_shape(dims),
+                    });
+                }
+                for (dst, src) in m.data.chunks_exact_mut(mw as usize).zip(data.chunks_exact(mw as usize)) {
+                    for (d, s) in dst.iter_mut().zip(src.iter().rev()) {
+                        *d = 0.5 * (*d + *s);
+                    }
                 }
             }
-        }
-        Ok(())
+            Ok(())
+        })
     }
 }
 
-fn check_layout(path: &Path, session: &Session, cfg: &DepthConfig) -> Result<(u32, u32), InferError> {
+fn check_layout(path: &Path, model: &mut Model, cfg: &DepthConfig) -> Result<(u32, u32), InferError> {
     let shape_err = |what: &str, expected: &str, actual: String| InferError::Shape {
         path: path.to_path_buf(),
         what: what.to_string(),
         expected: expected.to_string(),
         actual,
     };
-    if session.inputs().len() != 1 {
-        return Err(shape_err("inputs", "1 input `[1, 3, H, W]`", format!("{} inputs", session.inputs().len())));
+    if model.inputs().len() != 1 {
+        return Err(shape_err("inputs", "1 input `[1, 3, H, W]`", format!("{} inputs", model.inputs().len())));
     }
-    let input = &session.inputs()[0];
-    let what = format!("input `{}`", input.name());
-    let dims = float_tensor_shape(path, &what, input.dtype())?;
+    let input = &model.inputs()[0];
+    let what = format!("input `{}`", input.name);
+    let dims = input.float_shape(path, &what)?;
     if dims.len() != 4 || !(dims[0] == 1 || dims[0] < 0) || dims[1] != 3 {
         return Err(shape_err(&what, "[1, 3, H, W] (RGB, NCHW)", fmt_shape(&dims)));
     }
     let net = resolve_size(path, &what, &dims[2..4], cfg.input_size, "depth.input_size")?;
-    let Some(output) = session.outputs().first() else {
+    // The outputs' shapes are known once the input's is (tract plans the graph for it here).
+    model.set_input_shape(path, [1, 3, net.1 as usize, net.0 as usize])?;
+    let Some(output) = model.outputs().first() else {
         return Err(shape_err("outputs", "1 output `[1, H, W]`", "none".into()));
     };
-    let what = format!("output `{}`", output.name());
-    let odims = float_tensor_shape(path, &what, output.dtype())?;
+    let what = format!("output `{}`", output.name);
+    let odims = output.float_shape(path, &what)?;
     let ok = match odims.as_slice() {
         [b, _, _] => *b == 1 || *b < 0,
         [b, c, _, _] => (*b == 1 || *b < 0) && *c == 1,

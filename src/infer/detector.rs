@@ -4,15 +4,13 @@
 
 use std::path::{Path, PathBuf};
 
-use ort::session::Session;
-use ort::value::TensorRef;
-
 use super::InferError;
+use super::backend::{Backend, Model};
 use super::config::DetectorConfig;
 use super::decode::{Detection, clip_to_frame, decode_yolo, nms};
 use super::frame::{Normalize, Resampler, RgbFrame};
 use super::letterbox::{Letterbox, PAD_VALUE};
-use super::runtime::{SessionOptions, float_tensor_shape, fmt_shape, open_session};
+use super::runtime::{SessionOptions, fmt_shape};
 use crate::units::Seconds;
 
 /// Detections of one frame, stamped with that frame's time.
@@ -26,7 +24,7 @@ pub struct Detections<'a> {
 
 /// A loaded detector with its reusable buffers.
 pub struct Detector {
-    session: Session,
+    model: Model,
     path: PathBuf,
     cfg: DetectorConfig,
     net: (u32, u32),
@@ -39,20 +37,31 @@ pub struct Detector {
 
 impl std::fmt::Debug for Detector {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Detector").field("path", &self.path).field("net", &self.net).field("nc", &self.nc).finish()
+        f.debug_struct("Detector")
+            .field("path", &self.path)
+            .field("backend", &self.model.backend())
+            .field("net", &self.net)
+            .field("nc", &self.nc)
+            .finish()
     }
 }
 
 impl Detector {
-    /// Loads `cfg.model` and checks that it follows the YOLO detection convention.
+    /// Loads `cfg.model` with the build's default backend and checks that it follows the YOLO
+    /// detection convention.
     pub fn open(cfg: &DetectorConfig, opts: SessionOptions) -> Result<Self, InferError> {
+        Self::open_with(cfg, opts, Backend::DEFAULT)
+    }
+
+    /// As [`Self::open`], with the given backend.
+    pub fn open_with(cfg: &DetectorConfig, opts: SessionOptions, backend: Backend) -> Result<Self, InferError> {
         cfg.validate()?;
         let path = cfg.model.clone();
-        let session = open_session(&path, opts)?;
-        let (net, nc) = check_layout(&path, &session, cfg)?;
+        let mut model = Model::open(&path, opts, backend)?;
+        let (net, nc) = check_layout(&path, &mut model, cfg)?;
         let plane = net.0 as usize * net.1 as usize;
         Ok(Self {
-            session,
+            model,
             path,
             cfg: cfg.clone(),
             net,
@@ -75,6 +84,10 @@ impl Detector {
     /// The model file.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+    /// The backend running the network.
+    pub fn backend(&self) -> Backend {
+        self.model.backend()
     }
 
     /// The network input buffer as last filled by `preprocess` (planar `[3, H, W]`).
@@ -117,23 +130,19 @@ impl Detector {
     /// Runs the network on the current input buffer and decodes with letterbox `lb`.
     pub fn run_preprocessed(&mut self, lb: &Letterbox, t: Seconds) -> Result<Detections<'_>, InferError> {
         let (w, h) = (self.net.0 as usize, self.net.1 as usize);
-        let path = &self.path;
-        let run_err = |e: ort::Error| InferError::Run { path: path.clone(), reason: e.to_string() };
-        let tensor = TensorRef::from_array_view(([1usize, 3, h, w], &self.input[..])).map_err(run_err)?;
-        let outputs = self.session.run(ort::inputs![tensor]).map_err(run_err)?;
-        let (shape, data) = outputs[0].try_extract_tensor::<f32>().map_err(run_err)?;
-        let dims: Vec<i64> = shape.iter().copied().collect();
-        if dims.len() != 3 || dims[0] != 1 || dims[1] as usize != 4 + self.nc {
-            return Err(InferError::Shape {
-                path: path.clone(),
-                what: "output at run time".into(),
-                expected: format!("[1, {}, N]", 4 + self.nc),
-                actual: fmt_shape(&dims),
-            });
-        }
-        let n = dims[2] as usize;
-        decode_yolo(data, self.nc, n, self.cfg.confidence as f32, lb, &mut self.dets);
-        drop(outputs);
+        let (path, nc, conf, dets) = (&self.path, self.nc, self.cfg.confidence as f32, &mut self.dets);
+        self.model.run(path, [1, 3, h, w], &self.input, |dims, data| {
+            if dims.len() != 3 || dims[0] != 1 || dims[1] as usize != 4 + nc {
+                return Err(InferError::Shape {
+                    path: path.clone(),
+                    what: "output at run time".into(),
+                    expected: format!("[1, {}, N]", 4 + nc),
+                    actual: fmt_shape(dims),
+                });
+            }
+            decode_yolo(data, nc, dims[2] as usize, conf, lb, dets);
+            Ok(())
+        })?;
         nms(
             &mut self.dets,
             self.cfg.nms_iou,
@@ -147,29 +156,31 @@ impl Detector {
 }
 
 /// Checks the model's I/O against the convention; returns the input `(w, h)` and class count.
-fn check_layout(path: &Path, session: &Session, cfg: &DetectorConfig) -> Result<((u32, u32), usize), InferError> {
+fn check_layout(path: &Path, model: &mut Model, cfg: &DetectorConfig) -> Result<((u32, u32), usize), InferError> {
     let shape_err = |what: &str, expected: String, actual: String| InferError::Shape {
         path: path.to_path_buf(),
         what: what.to_string(),
         expected,
         actual,
     };
-    if session.inputs().len() != 1 {
-        return Err(shape_err("inputs", "1 input `[1, 3, H, W]`".into(), format!("{} inputs", session.inputs().len())));
+    if model.inputs().len() != 1 {
+        return Err(shape_err("inputs", "1 input `[1, 3, H, W]`".into(), format!("{} inputs", model.inputs().len())));
     }
-    let input = &session.inputs()[0];
-    let what = format!("input `{}`", input.name());
-    let dims = float_tensor_shape(path, &what, input.dtype())?;
+    let input = &model.inputs()[0];
+    let what = format!("input `{}`", input.name);
+    let dims = input.float_shape(path, &what)?;
     let ok_batch = |d: i64| d == 1 || d < 0;
     if dims.len() != 4 || !ok_batch(dims[0]) || dims[1] != 3 {
         return Err(shape_err(&what, "[1, 3, H, W] (RGB, NCHW)".into(), fmt_shape(&dims)));
     }
     let net = resolve_size(path, &what, &dims[2..4], cfg.input_size, "detector.input_size")?;
-    let Some(output) = session.outputs().first() else {
+    // The outputs' shapes are known once the input's is (tract plans the graph for it here).
+    model.set_input_shape(path, [1, 3, net.1 as usize, net.0 as usize])?;
+    let Some(output) = model.outputs().first() else {
         return Err(shape_err("outputs", "1 output `[1, 4 + nc, N]`".into(), "none".into()));
     };
-    let what = format!("output `{}`", output.name());
-    let odims = float_tensor_shape(path, &what, output.dtype())?;
+    let what = format!("output `{}`", output.name);
+    let odims = output.float_shape(path, &what)?;
     // A YOLO head has far more anchors than rows; `[1, N, 6]` is an end-to-end (NMS-free, e.g.
     // YOLO26) or transposed export, which this decoder does not read.
     let transposed = odims.len() == 3 && odims[2] > 0 && odims[2] <= odims[1];

@@ -1,5 +1,5 @@
-//! The one ONNX Runtime environment of the process, the lookup of the shared library, and session
-//! creation with checked input/output layouts.
+//! The one ONNX Runtime environment of the process and the lookup of its shared library (feature
+//! `ort`), model path resolution, and the session options shared by both backends.
 //!
 //! Library lookup order (first that loads wins):
 //! 1. `ORT_DYLIB_PATH` (if set, it must work: a wrong explicit path is an error, not a fallback);
@@ -8,93 +8,100 @@
 //!    absolute path baked in at compile time so `target/release/fme` finds it with no variable set;
 //! 4. the system's dynamic-loader search path.
 
-use std::ffi::OsString;
-use std::fmt::Write as _;
+#[cfg(feature = "ort")]
+pub use self::onnxruntime::*;
 use std::path::{Path, PathBuf};
-use std::sync::{Mutex, OnceLock};
 
-use ort::environment::Environment;
-use ort::session::Session;
-use ort::session::builder::GraphOptimizationLevel;
-use ort::value::ValueType;
+#[cfg(feature = "ort")]
+mod onnxruntime {
+    use std::ffi::OsString;
+    use std::fmt::Write as _;
+    use std::path::{Path, PathBuf};
+    use std::sync::{Mutex, OnceLock};
 
-use super::InferError;
+    use ort::environment::Environment;
 
-/// File name of the ONNX Runtime shared library on Linux.
-pub const LIBRARY_NAME: &str = "libonnxruntime.so";
+    use crate::infer::InferError;
 
-/// The repository's copy of ONNX Runtime, installed by `scripts/setup.sh`.
-pub const REPO_LIBRARY: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/.ort/lib/libonnxruntime.so");
+    /// File name of the ONNX Runtime shared library on Linux.
+    pub const LIBRARY_NAME: &str = "libonnxruntime.so";
 
-static ENV: OnceLock<Environment> = OnceLock::new();
-static INIT: Mutex<()> = Mutex::new(());
+    /// The repository's copy of ONNX Runtime, installed by `scripts/setup.sh`.
+    pub const REPO_LIBRARY: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/.ort/lib/libonnxruntime.so");
 
-/// Where the library is looked for, in order, given the value of `ORT_DYLIB_PATH` and the directory
-/// of the running executable. A pure function so the order is testable.
-pub fn library_candidates(env_path: Option<OsString>, exe_dir: Option<&Path>) -> Vec<(PathBuf, &'static str)> {
-    let mut out = Vec::with_capacity(4);
-    if let Some(p) = env_path.filter(|p| !p.is_empty()) {
-        out.push((PathBuf::from(p), "ORT_DYLIB_PATH"));
-        // An explicit path is the user's choice: no silent fallback.
-        return out;
-    }
-    if let Some(dir) = exe_dir {
-        out.push((dir.join(LIBRARY_NAME), "beside the executable"));
-    }
-    out.push((PathBuf::from(REPO_LIBRARY), "repository .ort/lib"));
-    out.push((PathBuf::from(LIBRARY_NAME), "system library path"));
-    out
-}
+    static ENV: OnceLock<Environment> = OnceLock::new();
+    static INIT: Mutex<()> = Mutex::new(());
 
-/// Loads ONNX Runtime from the first candidate that works (see the module doc) and creates the
-/// process-wide environment once. Later calls return the same environment.
-pub fn environment() -> Result<&'static Environment, InferError> {
-    if let Some(env) = ENV.get() {
-        return Ok(env);
-    }
-    let exe_dir = std::env::current_exe().ok().and_then(|p| p.parent().map(Path::to_path_buf));
-    init_with(library_candidates(std::env::var_os("ORT_DYLIB_PATH"), exe_dir.as_deref()))
-}
-
-/// Like [`environment`], but with an explicit library path (e.g. from the configuration).
-pub fn environment_from(library: &Path) -> Result<&'static Environment, InferError> {
-    if let Some(env) = ENV.get() {
-        return Ok(env);
-    }
-    init_with(vec![(library.to_path_buf(), "configured path")])
-}
-
-fn init_with(candidates: Vec<(PathBuf, &'static str)>) -> Result<&'static Environment, InferError> {
-    let _guard = INIT.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some(env) = ENV.get() {
-        return Ok(env);
-    }
-    let mut tried = String::new();
-    let mut loaded = None;
-    for (path, origin) in &candidates {
-        // Absolute paths that do not exist are skipped without calling into ort (its loader would
-        // only say "cannot open"); bare names go to the dynamic loader's search path.
-        if path.is_absolute() && !path.exists() {
-            let _ = write!(tried, "{} ({origin}): no such file; ", path.display());
-            continue;
+    /// Where the library is looked for, in order, given the value of `ORT_DYLIB_PATH` and the directory
+    /// of the running executable. A pure function so the order is testable.
+    pub fn library_candidates(env_path: Option<OsString>, exe_dir: Option<&Path>) -> Vec<(PathBuf, &'static str)> {
+        let mut out = Vec::with_capacity(4);
+        if let Some(p) = env_path.filter(|p| !p.is_empty()) {
+            out.push((PathBuf::from(p), "ORT_DYLIB_PATH"));
+            // An explicit path is the user's choice: no silent fallback.
+            return out;
         }
-        match ort::init_from(path) {
-            Ok(builder) => {
-                loaded = Some((builder, path.clone()));
-                break;
+        if let Some(dir) = exe_dir {
+            out.push((dir.join(LIBRARY_NAME), "beside the executable"));
+        }
+        out.push((PathBuf::from(REPO_LIBRARY), "repository .ort/lib"));
+        out.push((PathBuf::from(LIBRARY_NAME), "system library path"));
+        out
+    }
+
+    /// Loads ONNX Runtime from the first candidate that works (see the module doc) and creates the
+    /// process-wide environment once. Later calls return the same environment.
+    pub fn environment() -> Result<&'static Environment, InferError> {
+        if let Some(env) = ENV.get() {
+            return Ok(env);
+        }
+        let exe_dir = std::env::current_exe().ok().and_then(|p| p.parent().map(Path::to_path_buf));
+        init_with(library_candidates(std::env::var_os("ORT_DYLIB_PATH"), exe_dir.as_deref()))
+    }
+
+    /// Like [`environment`], but with an explicit library path (e.g. from the configuration).
+    pub fn environment_from(library: &Path) -> Result<&'static Environment, InferError> {
+        if let Some(env) = ENV.get() {
+            return Ok(env);
+        }
+        init_with(vec![(library.to_path_buf(), "configured path")])
+    }
+
+    fn init_with(candidates: Vec<(PathBuf, &'static str)>) -> Result<&'static Environment, InferError> {
+        let _guard = INIT.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(env) = ENV.get() {
+            return Ok(env);
+        }
+        let mut tried = String::new();
+        let mut loaded = None;
+        for (path, origin) in &candidates {
+            // Absolute paths that do not exist are skipped without calling into ort (its loader would
+            // only say "cannot open"); bare names go to the dynamic loader's search path.
+            if path.is_absolute() && !path.exists() {
+                let _ = write!(tried, "{} ({origin}): no such file; ", path.display());
+                continue;
             }
-            Err(e) => {
-                let _ = write!(tried, "{} ({origin}): {e}; ", path.display());
+            match ort::init_from(path) {
+                Ok(builder) => {
+                    loaded = Some((builder, path.clone()));
+                    break;
+                }
+                Err(e) => {
+                    let _ = write!(tried, "{} ({origin}): {e}; ", path.display());
+                }
             }
         }
+        let Some((builder, path)) = loaded else {
+            return Err(InferError::Library { tried: tried.trim_end_matches("; ").to_string() });
+        };
+        let env = builder
+            .with_name("fme")
+            .with_telemetry(false)
+            .build()
+            .map_err(|e| InferError::Environment(e.to_string()))?;
+        tracing::info!(library = %path.display(), "ONNX Runtime loaded");
+        Ok(ENV.get_or_init(|| env))
     }
-    let Some((builder, path)) = loaded else {
-        return Err(InferError::Library { tried: tried.trim_end_matches("; ").to_string() });
-    };
-    let env =
-        builder.with_name("fme").with_telemetry(false).build().map_err(|e| InferError::Environment(e.to_string()))?;
-    tracing::info!(library = %path.display(), "ONNX Runtime loaded");
-    Ok(ENV.get_or_init(|| env))
 }
 
 /// Finds a model file: as given, else (relative paths) beside the repository or install prefix of
@@ -119,7 +126,8 @@ pub fn resolve_model(path: &Path) -> PathBuf {
 /// Session options shared by the detector and the depth network.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SessionOptions {
-    /// Intra-op threads (includes the calling thread). 0 lets ONNX Runtime choose.
+    /// Intra-op threads (includes the calling thread). 0 lets ONNX Runtime choose. tract runs on
+    /// one thread.
     pub intra_threads: usize,
     /// Let idle worker threads spin (lower latency, but burns CPU the tracker could use).
     pub spin: bool,
@@ -128,43 +136,6 @@ pub struct SessionOptions {
 impl Default for SessionOptions {
     fn default() -> Self {
         Self { intra_threads: 2, spin: false }
-    }
-}
-
-/// Opens `path` as an ONNX Runtime session. A missing file, a corrupt model or a model the runtime
-/// rejects is an [`InferError::ModelFile`] naming the file.
-pub fn open_session(path: &Path, opts: SessionOptions) -> Result<Session, InferError> {
-    let model_err = |reason: String| InferError::ModelFile { path: path.to_path_buf(), reason };
-    // Read first: ORT's own message for a missing file is less clear, and this checks readability.
-    let bytes = std::fs::read(path).map_err(|e| model_err(format!("cannot read: {e}")))?;
-    if bytes.is_empty() {
-        return Err(model_err("file is empty".into()));
-    }
-    let env = environment()?;
-    let mut builder = Session::builder(env)
-        .map_err(|e| model_err(e.to_string()))?
-        .with_optimization_level(GraphOptimizationLevel::All)
-        .map_err(|e| model_err(e.to_string()))?;
-    if opts.intra_threads > 0 {
-        builder = builder.with_intra_threads(opts.intra_threads).map_err(|e| model_err(e.to_string()))?;
-    }
-    builder = builder.with_intra_op_spinning(opts.spin).map_err(|e| model_err(e.to_string()))?;
-    builder.commit_from_memory(&bytes).map_err(|e| model_err(format!("not a loadable ONNX model: {e}")))
-}
-
-/// Shape of a float tensor outlet (`-1` for dynamic dimensions), or a [`InferError::Shape`] naming
-/// `what` when the outlet is not a float32 tensor.
-pub fn float_tensor_shape(path: &Path, what: &str, ty: &ValueType) -> Result<Vec<i64>, InferError> {
-    match ty {
-        ValueType::Tensor { ty, shape, .. } if *ty == ort::value::TensorElementType::Float32 => {
-            Ok(shape.iter().copied().collect())
-        }
-        other => Err(InferError::Shape {
-            path: path.to_path_buf(),
-            what: what.to_string(),
-            expected: "float32 tensor".into(),
-            actual: format!("{other:?}"),
-        }),
     }
 }
 
@@ -178,6 +149,7 @@ pub fn fmt_shape(dims: &[i64]) -> String {
 mod tests {
     use super::*;
 
+    #[cfg(feature = "ort")]
     #[test]
     fn explicit_env_path_is_the_only_candidate() {
         let c = library_candidates(Some("/opt/ort/libonnxruntime.so".into()), Some(Path::new("/usr/bin")));
@@ -185,6 +157,7 @@ mod tests {
         assert_eq!(c[0].0, PathBuf::from("/opt/ort/libonnxruntime.so"));
     }
 
+    #[cfg(feature = "ort")]
     #[test]
     fn default_order_is_exe_dir_repo_system() {
         let c = library_candidates(None, Some(Path::new("/srv/fme/bin")));

@@ -96,7 +96,17 @@ impl FishPipeline {
     /// uncalibrated; fish are tracked but no speed is reported). Errors name the config key and the
     /// file (missing ONNX Runtime, missing or mismatched model).
     pub fn new(cfg: &Config, calibration: Option<Calibration>) -> Result<Self, String> {
-        Self::build(cfg, calibration, None)
+        Self::build(cfg, calibration, None, infer::Backend::DEFAULT)
+    }
+
+    /// As [`Self::new`], with the networks run by `backend` (a build with both backends: the
+    /// parity test and the backend benchmark).
+    pub fn with_backend(
+        cfg: &Config,
+        calibration: Option<Calibration>,
+        backend: infer::Backend,
+    ) -> Result<Self, String> {
+        Self::build(cfg, calibration, None, backend)
     }
 
     /// The same pipeline with stages replaced by `substitute` (`fme eval`); networks it replaces
@@ -106,10 +116,15 @@ impl FishPipeline {
         calibration: Option<Calibration>,
         substitute: Box<dyn Substitute>,
     ) -> Result<Self, String> {
-        Self::build(cfg, calibration, Some(substitute))
+        Self::build(cfg, calibration, Some(substitute), infer::Backend::DEFAULT)
     }
 
-    fn build(cfg: &Config, calibration: Option<Calibration>, sub: Option<Box<dyn Substitute>>) -> Result<Self, String> {
+    fn build(
+        cfg: &Config,
+        calibration: Option<Calibration>,
+        sub: Option<Box<dyn Substitute>>,
+        backend: infer::Backend,
+    ) -> Result<Self, String> {
         cfg.detector.validate().map_err(|e| e.to_string())?;
         cfg.depth.validate().map_err(|e| e.to_string())?;
         cfg.tracker.validate().map_err(|e| format!("tracker: {e}"))?;
@@ -118,20 +133,20 @@ impl FishPipeline {
         let needs_detector = !sub.as_ref().is_some_and(|s| s.replaces_tracks() || s.replaces_detector());
         let needs_depth = !sub.as_ref().is_some_and(|s| s.replaces_depth());
         if needs_detector || needs_depth {
-            infer::runtime::environment().map_err(|e| format!("ONNX Runtime: {e}"))?;
+            backend.prepare().map_err(|e| format!("{}: {e}", backend.name()))?;
         }
         let detector = if needs_detector {
             let c = infer::DetectorConfig {
                 model: infer::runtime::resolve_model(&cfg.detector.model),
                 ..cfg.detector.clone()
             };
-            Some(Detector::open(&c, c.session()).map_err(|e| format!("detector.model: {e}"))?)
+            Some(Detector::open_with(&c, c.session(), backend).map_err(|e| format!("detector.model: {e}"))?)
         } else {
             None
         };
         let depth = if needs_depth {
             let c = infer::DepthConfig { model: infer::runtime::resolve_model(&cfg.depth.model), ..cfg.depth.clone() };
-            Some(DepthNet::open(&c, c.session()).map_err(|e| format!("depth.model: {e}"))?)
+            Some(DepthNet::open_with(&c, c.session(), backend).map_err(|e| format!("depth.model: {e}"))?)
         } else {
             None
         };

@@ -421,7 +421,15 @@ impl Daemon {
         let bank = Arc::new(RegisterBank::new());
         let shared = Arc::new(Shared::new(config_text, cfg.console.log_lines));
         shared.with_health(|h| h.source = source.describe());
-        shared.log(Level::INFO, format!("fme {} starting on {}", env!("CARGO_PKG_VERSION"), source.describe()));
+        shared.log(
+            Level::INFO,
+            format!(
+                "fme {} ({}) starting on {}",
+                env!("CARGO_PKG_VERSION"),
+                crate::infer::backend::BUILD,
+                source.describe()
+            ),
+        );
         let publisher = Arc::new(Mutex::new(Publisher::new(&cfg, bank.clone())));
         let mut other_threads = Vec::new();
         if let Some(dir) = history_dir(&cfg) {

@@ -177,6 +177,9 @@ fn missing_model_or_onnx_runtime_is_named_at_start() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "a missing model is a start-up (usage) error: {err}");
     assert!(err.contains("detector.model") && err.contains("/nonexistent/fish-det.onnx"), "{err}");
+    if !cfg!(feature = "ort") {
+        return; // tract: no library to miss.
+    }
     let ok = write(dir.path(), "ok.toml", "[output.modbus]\nlisten = \"127.0.0.1:0\"\n");
     let out = fme()
         .args(["run", "--config"])
@@ -189,6 +192,17 @@ fn missing_model_or_onnx_runtime_is_named_at_start() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "a missing ONNX Runtime is a start-up error: {err}");
     assert!(err.contains("ONNX Runtime") && err.contains("/nonexistent/ort/libonnxruntime.so"), "{err}");
+}
+
+/// `fme --version` names the inference backend and whether the models are inside the executable.
+#[test]
+fn version_names_the_backend() {
+    let out = fme().arg("--version").output().expect("run");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert_eq!(text.trim(), format!("fme {}", fme::infer::backend::VERSION));
+    #[cfg(all(feature = "ort", not(feature = "embed-models")))]
+    assert_eq!(text.trim(), format!("fme {} (backend onnxruntime)", env!("CARGO_PKG_VERSION")));
 }
 
 /// A free local port (bound, then released) for a daemon the test talks to.

@@ -129,7 +129,10 @@ async fn console_commands_and_fuzz() {
         assert!(acc.contains("ERR"), "fuzz must get error lines");
         acc.clear();
         let v = ask(port, &mut acc, "version");
-        assert!(v.contains(env!("CARGO_PKG_VERSION")), "console still answers after fuzz: {v:?}");
+        assert!(
+            v.contains(env!("CARGO_PKG_VERSION")) && v.contains(fme::infer::backend::BUILD),
+            "console still answers after fuzz, naming the backend: {v:?}"
+        );
     })
     .await;
     drop(slave);
