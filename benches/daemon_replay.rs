@@ -185,7 +185,7 @@ async fn realtime(seq: &Path, secs: u64, extra: Extra<'_>) -> Realtime {
         if plc.read_input_registers(0, 24).await.is_ok_and(|r| r.is_ok()) {
             polls += 1;
         }
-        if let Some(addr) = metrics.filter(|_| next_scrape.elapsed() >= Duration::ZERO) {
+        if let Some(addr) = metrics.filter(|_| Instant::now() >= next_scrape) {
             next_scrape += Duration::from_secs(1);
             let n = scrape(addr).await;
             scrapes += u32::from(n > 0);
