@@ -20,7 +20,6 @@ use fme::capture::{FrameSource, RecordedSource};
 use fme::config::{Config, ModbusMode};
 use fme::service::{self, Daemon, RunOptions};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 use tokio_modbus::prelude::*;
 
@@ -93,51 +92,9 @@ enum Extra<'a> {
     Telemetry(u16),
 }
 
-/// A Mosquitto on a free loopback port, killed on drop.
-struct Broker {
-    child: Child,
-    port: u16,
-    _dir: tempfile::TempDir,
-}
-
-impl Broker {
-    fn start() -> Broker {
-        let path = std::env::var_os("PATH").unwrap_or_default();
-        let exe = std::env::split_paths(&path)
-            .map(|d| d.join("mosquitto"))
-            .chain(["/usr/sbin", "/usr/local/sbin", "/usr/bin"].map(|d| Path::new(d).join("mosquitto")))
-            .find(|p| p.is_file())
-            .unwrap_or_else(|| {
-                eprintln!("daemon_replay: mosquitto not found on PATH or in /usr/sbin: run `make setup`");
-                std::process::exit(2)
-            });
-        let dir = tempfile::tempdir().expect("tempdir");
-        let port =
-            std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("port");
-        let conf = dir.path().join("mosquitto.conf");
-        std::fs::write(&conf, format!("listener {port} 127.0.0.1\nallow_anonymous true\nuser root\n")).expect("conf");
-        let child = Command::new(exe)
-            .arg("-c")
-            .arg(&conf)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("mosquitto");
-        let end = Instant::now() + Duration::from_secs(10);
-        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-            assert!(Instant::now() < end, "mosquitto did not start");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        Broker { child, port, _dir: dir }
-    }
-}
-
-impl Drop for Broker {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
+#[path = "support/broker.rs"]
+mod broker;
+use broker::Broker;
 
 /// One scrape of the metrics endpoint: the body's length, 0 on any failure.
 async fn scrape(addr: std::net::SocketAddr) -> usize {
@@ -248,7 +205,7 @@ async fn main() {
     let telemetry = env_num("FME_BENCH_TELEMETRY", 0) == 1;
     if record || telemetry {
         let what = if record { "record" } else { "telemetry" };
-        let broker = telemetry.then(Broker::start);
+        let broker = telemetry.then(|| Broker::start("daemon_replay"));
         let rounds = env_num("FME_BENCH_RECORD_ROUNDS", 2);
         let mut sums = [[0.0f64; 3]; 2];
         let mut bytes_per_frame = 0.0;

@@ -9,22 +9,11 @@
 
 use fme::history::Row;
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-fn mosquitto() -> PathBuf {
-    let path = std::env::var_os("PATH").unwrap_or_default();
-    std::env::split_paths(&path)
-        .map(|d| d.join("mosquitto"))
-        .chain(["/usr/sbin", "/usr/local/sbin", "/usr/bin"].map(|d| Path::new(d).join("mosquitto")))
-        .find(|p| p.is_file())
-        .unwrap_or_else(|| {
-            eprintln!("mqtt_fleet: mosquitto not found on PATH or in /usr/sbin: run `make setup`");
-            std::process::exit(2)
-        })
-}
+#[path = "support/broker.rs"]
+mod broker;
 
 fn env_or(name: &str, default: u64) -> u64 {
     std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
@@ -55,22 +44,8 @@ type Sent = Arc<Mutex<Vec<Vec<Option<Instant>>>>>;
 fn main() {
     let boxes = env_or("MQTT_BENCH_BOXES", 50) as usize;
     let secs = env_or("MQTT_BENCH_S", 60);
-    let dir = tempfile::tempdir().expect("tempdir");
-    let port = std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("port");
-    let conf = dir.path().join("mosquitto.conf");
-    std::fs::write(&conf, format!("listener {port} 127.0.0.1\nallow_anonymous true\nuser root\n")).expect("conf");
-    let mut broker = Command::new(mosquitto())
-        .arg("-c")
-        .arg(&conf)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("mosquitto");
-    let end = Instant::now() + Duration::from_secs(10);
-    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(Instant::now() < end, "mosquitto did not start");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let broker = broker::Broker::start("mqtt_fleet");
+    let port = broker.port;
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime");
     let sent: Sent = Arc::new(Mutex::new(vec![vec![None; secs as usize + 1]; boxes]));
     let latencies = Arc::new(Mutex::new(Vec::<f64>::with_capacity(boxes * secs as usize)));
@@ -107,7 +82,7 @@ fn main() {
         });
         received
     });
-    let cpu0 = cpu_s(broker.id());
+    let cpu0 = cpu_s(broker.child.id());
     let t0 = Instant::now();
     let published = rt.block_on(async {
         let mut tasks = Vec::new();
@@ -163,10 +138,9 @@ fn main() {
         total
     });
     let wall = t0.elapsed().as_secs_f64();
-    let cpu = cpu_s(broker.id()) - cpu0;
+    let cpu = cpu_s(broker.child.id()) - cpu0;
     let got = received.load(std::sync::atomic::Ordering::Relaxed);
-    let _ = broker.kill();
-    let _ = broker.wait();
+    drop(broker);
     let mut lat = latencies.lock().expect("lock").clone();
     lat.sort_by(f64::total_cmp);
     println!("mqtt_fleet: {boxes} boxes x 1 Hz x {secs} s, QoS 1, one local mosquitto, one subscriber");
