@@ -55,6 +55,32 @@ fn the_fish_fit_recovers_the_scale_without_references() {
 }
 
 #[test]
+fn a_long_scene_without_references_keeps_its_scale() {
+    // 30 s without references: the fish's lengths measured through the fish fit's own depths read
+    // long as the fit settles (+22 % on this scene before each fish was taken at the ruler length).
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("long");
+    let cfg = SynthConfig {
+        preset: Preset::Swarm,
+        fish: 20,
+        frames: 900,
+        seed: 33,
+        width: 320,
+        height: 192,
+        layout: Layout::None,
+        cohort: Cohort { mean_length_m: 0.35, length_cv: 0.1 },
+        ..SynthConfig::default()
+    };
+    generate(&cfg, &out, false, &|_| {}).unwrap();
+    let seq = Sequence::open(&out).unwrap();
+    let r = evaluate(&seq, &Config::default(), &opts()).unwrap();
+    assert_eq!(r.scale_source, "fish");
+    let ratio = r.mean_est_mps / r.mean_true_mps;
+    assert!((ratio - 1.0).abs() < 0.06, "est {} true {}", r.mean_est_mps, r.mean_true_mps);
+    assert!(r.speed_distcorr > 0.9, "distcorr {}", r.speed_distcorr);
+}
+
+#[test]
 fn auto_turns_to_the_fish_when_the_references_are_hidden() {
     let seq = Sequence::open(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/swarm20")).unwrap();
     let cfg = Config::default();

@@ -2,7 +2,7 @@
 
 use super::heading::{
     AlongRay, LengthHistogram, SWARM_LENGTH_MEMORY_S, angle_between, apparent_length, fish_length, foreshortening,
-    speed_from_heading, swarm_floor,
+    ruler_foreshortening, speed_from_heading, swarm_floor,
 };
 use super::stats::mean_ci95;
 use crate::geometry::{Camera, CameraPoint, Pixel, PixelBox, WorldPoint};
@@ -291,6 +291,8 @@ pub struct ActivityEstimator {
     swarm_lengths_t: f64,
     /// [`swarm_floor`] of `swarm_lengths` at the start of the frame.
     swarm_floor: Option<Metres>,
+    /// The fish's length while the fish set the depth scale ([`Self::set_ruler_length`]).
+    ruler_length: Option<Metres>,
 }
 
 impl ActivityEstimator {
@@ -311,7 +313,18 @@ impl ActivityEstimator {
             swarm_lengths: LengthHistogram::default(),
             swarm_lengths_t: f64::NAN,
             swarm_floor: None,
+            ruler_length: None,
         }
+    }
+
+    /// The length every fish is taken to have while the fish themselves set the depth scale (the
+    /// fish as the ruler, `crate::metric::Rulers`): that scale makes the fish's broadside lengths
+    /// the cohort's length, so measuring each fish's length again through those depths would only
+    /// add their noise and the fits' changes, and an upper quantile of noisy lengths reads long (the
+    /// speeds with it; docs/accuracy.md). Against the ruler's length the foreshortening is not capped
+    /// ([`ruler_foreshortening`]). `None` (references, ground truth): measured per fish.
+    pub fn set_ruler_length(&mut self, length: Option<Metres>) {
+        self.ruler_length = length.filter(|l| l.0.is_finite() && l.0 > 0.0);
     }
 
     /// The camera positions are lifted with.
@@ -438,7 +451,7 @@ impl ActivityEstimator {
                 SpeedMethod::Chord => None,
             };
             let chord_time = 0.5 * (t.0 + reference.t);
-            let estimated_length = || fish_length(&s.lengths, self.swarm_floor);
+            let estimated_length = || self.ruler_length.or_else(|| fish_length(&s.lengths, self.swarm_floor));
             let (v, t_ref) = match self.motion.along_ray {
                 AlongRay::Depth => regression(|p| p.p)
                     .unwrap_or_else(|| (distance(now.p, reference.p) / (t.0 - reference.t), chord_time)),
@@ -463,9 +476,10 @@ impl ActivityEstimator {
                     let depth_chord = regression(|p| p.p)
                         .map_or_else(|| distance(now.p, reference.p) / (t.0 - reference.t), |(v, _)| v);
                     let apparent = (n_seen > 0).then(|| Metres(seen_sum / n_seen as f64));
-                    let cos = apparent
-                        .zip(estimated_length())
-                        .and_then(|(a, l)| foreshortening(a, l, self.motion.body_width_ratio));
+                    let cos = apparent.zip(estimated_length()).and_then(|(a, l)| match self.ruler_length {
+                        Some(_) => ruler_foreshortening(a, l, self.motion.body_width_ratio),
+                        None => foreshortening(a, l, self.motion.body_width_ratio),
+                    });
                     (cos.map_or(f64::NAN, |c| speed_from_heading(across, c, depth_chord)), t_ref)
                 }
             };
@@ -722,6 +736,57 @@ mod tests {
         let depth = run(AlongRay::Depth, SpeedMethod::Chord);
         let err = |s: &[f64; 5]| s.iter().map(|x| (x - v).abs()).sum::<f64>();
         assert!(err(&depth) > 1.5 * err(&heading), "depth {depth:?}, heading {heading:?}");
+    }
+
+    /// With a ruler length (the fish as the ruler), every fish is taken at that length, without the
+    /// cap at 1: a long fish reads slow, a short one fast, the mean near right. Measured lengths
+    /// give each its own speed.
+    #[test]
+    fn a_ruler_length_sets_every_fish_length() {
+        let cam = camera();
+        let (v, dt) = (0.4, 1.0 / 30.0);
+        let lengths = [0.3, 0.4];
+        let run = |ruler: Option<Metres>| {
+            let cfg = MotionConfig { body_length_m: Metres(0.35), ..Default::default() };
+            let mut est = ActivityEstimator::new(cam, cfg, PostprocessConfig::off());
+            est.set_ruler_length(ruler);
+            for k in 0..60 {
+                let t = k as f64 * dt;
+                let obs: Vec<_> = lengths
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &len)| {
+                        // Broadside, swimming across the image at `v`.
+                        let w = WorldPoint::new(-0.6 + v * t, 0.5 + 0.3 * i as f64, 1.5);
+                        let z = cam.pose.to_camera(&w).depth();
+                        let end =
+                            |e: f64| cam.world_to_pixel(&WorldPoint::new(w.0.x + e * len, w.0.y, w.0.z)).unwrap().u;
+                        let bbox = PixelBox::from_center(
+                            cam.world_to_pixel(&w).unwrap(),
+                            end(0.5) - end(-0.5),
+                            0.2 * len * cam.intrinsics.fy / z.0,
+                        );
+                        TrackObservation { id: i as u32, bbox, depth: Some(z) }
+                    })
+                    .collect();
+                est.update(Seconds(t), &obs);
+            }
+            let mut speeds = [0.0; 2];
+            for tv in est.tracks() {
+                speeds[tv.id as usize] = tv.speed.unwrap().0;
+            }
+            speeds
+        };
+        for (i, s) in run(None).iter().enumerate() {
+            assert!((s / v - 1.0).abs() < 0.05, "measured, fish {i}: {s}");
+        }
+        let ruled = run(Some(Metres(0.35)));
+        for (i, s) in ruled.iter().enumerate() {
+            let want = v * 0.35 / lengths[i];
+            assert!((s / want - 1.0).abs() < 0.05, "ruler, fish {i}: {s} m/s, want {want}");
+        }
+        // Not a length: measured again.
+        assert_eq!(run(Some(Metres(f64::NAN))), run(None));
     }
 
     #[test]

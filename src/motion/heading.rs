@@ -166,12 +166,20 @@ pub fn fish_length(own: &LengthHistogram, swarm_floor: Option<Metres>) -> Option
 /// [`MIN_FORESHORTENING`] (even below 0) it only says "end-on". `None` for a non-positive or
 /// non-finite length.
 pub fn foreshortening(apparent: Metres, length: Metres, width_ratio: f64) -> Option<f64> {
+    ruler_foreshortening(apparent, length, width_ratio).map(|c| c.min(1.0))
+}
+
+/// [`foreshortening`] against the ruler's length (the cohort's, while the fish set the depth scale),
+/// not capped at 1: a fish longer than the cohort shows more than that length broadside. Capped,
+/// the long fish would read at their speed and the short ones fast, and the mean high; uncapped,
+/// each fish is off by its length over the cohort's, both ways (docs/accuracy.md).
+pub fn ruler_foreshortening(apparent: Metres, length: Metres, width_ratio: f64) -> Option<f64> {
     let (a, l) = (apparent.0, length.0);
     if !(l.is_finite() && l > 0.0 && a.is_finite()) {
         return None;
     }
     let w = width_ratio.clamp(0.0, 0.9);
-    Some(((a - w * l) / (l * (1.0 - w))).min(1.0))
+    Some((a - w * l) / (l * (1.0 - w)))
 }
 
 /// A fish's speed from its speed `across` the line of sight and its `foreshortening`: `across /
@@ -180,7 +188,7 @@ pub fn foreshortening(apparent: Metres, length: Metres, width_ratio: f64) -> Opt
 /// with the change of depth, the paper's), and at least `across / MIN_FORESHORTENING`.
 pub fn speed_from_heading(across: f64, foreshortening: f64, depth_chord: f64) -> f64 {
     if foreshortening >= MIN_FORESHORTENING {
-        across / foreshortening.min(1.0)
+        across / foreshortening
     } else {
         (across / MIN_FORESHORTENING).max(depth_chord)
     }
@@ -280,7 +288,8 @@ mod tests {
     #[test]
     fn end_on_the_depth_change_decides() {
         assert!((speed_from_heading(0.25, 0.5, 9.0) - 0.5).abs() < 1e-12);
-        assert!((speed_from_heading(0.3, 1.4, 9.0) - 0.3).abs() < 1e-12);
+        // Above 1 (a fish longer than the ruler): slower than across.
+        assert!((speed_from_heading(0.3, 1.4, 9.0) - 0.3 / 1.4).abs() < 1e-12);
         assert!((speed_from_heading(0.03, 0.1, 0.4) - 0.4).abs() < 1e-12);
         assert!((speed_from_heading(0.03, -0.2, 0.05) - 0.1).abs() < 1e-12);
     }
@@ -297,6 +306,14 @@ mod tests {
         }
         assert!(foreshortening(Metres(0.02), l, 0.1).unwrap() < MIN_FORESHORTENING);
         assert_eq!(foreshortening(Metres(0.9), l, 0.1), Some(1.0));
+        // Against the ruler's length, a fish longer than the ruler is not capped.
+        let c = ruler_foreshortening(Metres(0.9), l, 0.1).unwrap();
+        assert!(
+            c > 1.0
+                && (foreshortening(Metres(0.3), l, 0.1).unwrap() - ruler_foreshortening(Metres(0.3), l, 0.1).unwrap())
+                    .abs()
+                    < 1e-12
+        );
         assert_eq!(foreshortening(Metres(0.3), Metres(0.0), 0.1), None);
     }
 }

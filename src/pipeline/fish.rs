@@ -544,6 +544,12 @@ impl Pipeline for FishPipeline {
         self.health.tracks = self.obs.len() as u32;
         self.health.detector_hz = self.det_rate.hz();
         self.health.depth_hz = self.depth_rate.hz();
+        // On the fish's scale with the configured length, every fish is as long as the ruler
+        // (`ActivityEstimator::set_ruler_length`). With a length measured under the references the
+        // fit carries their scale on, and the lengths measured under it with it.
+        let ruler = (self.calib.source == ScaleSource::Fish && !self.calib.ruler_length_learned)
+            .then_some(Metres(self.calib.ruler_length_m));
+        self.estimator.set_ruler_length(ruler);
         // Field by field, so the estimator can be borrowed mutably beside it.
         let view = depth_view(&self.depth, &self.substitute);
         let (fit, how, obs) = (self.fit.as_ref(), self.cfg.depth.sample, &self.obs);
