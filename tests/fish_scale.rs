@@ -11,6 +11,24 @@ use fme::synth::fish::Cohort;
 use fme::synth::{Layout, Preset, SynthConfig, generate};
 use fme::units::Metres;
 
+/// A 320 x 192 swarm of 20 fish, cohort 0.35 m +- 10 %, rendered into `dir`.
+fn scene(dir: &tempfile::TempDir, frames: u32, seed: u64, layout: Layout) -> Sequence {
+    let out = dir.path().join("seq");
+    let cfg = SynthConfig {
+        preset: Preset::Swarm,
+        fish: 20,
+        frames,
+        seed,
+        width: 320,
+        height: 192,
+        layout,
+        cohort: Cohort { mean_length_m: 0.35, length_cv: 0.1 },
+        ..SynthConfig::default()
+    };
+    generate(&cfg, &out, false, &|_| {}).unwrap();
+    Sequence::open(&out).unwrap()
+}
+
 fn opts() -> EvalOptions {
     EvalOptions { depth: DepthChoice::RelativeGt, ..Default::default() }
 }
@@ -18,20 +36,7 @@ fn opts() -> EvalOptions {
 #[test]
 fn the_fish_fit_recovers_the_scale_without_references() {
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("none");
-    let cfg = SynthConfig {
-        preset: Preset::Swarm,
-        fish: 20,
-        frames: 150,
-        seed: 31,
-        width: 320,
-        height: 192,
-        layout: Layout::None,
-        cohort: Cohort { mean_length_m: 0.35, length_cv: 0.1 },
-        ..SynthConfig::default()
-    };
-    generate(&cfg, &out, false, &|_| {}).unwrap();
-    let seq = Sequence::open(&out).unwrap();
+    let seq = scene(&dir, 150, 31, Layout::None);
     assert!(seq.meta.reference_objects.is_empty());
     let r = evaluate(&seq, &Config::default(), &opts()).unwrap();
     assert_eq!(r.scale_source, "fish");
@@ -59,20 +64,7 @@ fn a_long_scene_without_references_keeps_its_scale() {
     // 30 s without references: the fish's lengths measured through the fish fit's own depths read
     // long as the fit settles (+22 % on this scene before each fish was taken at the ruler length).
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("long");
-    let cfg = SynthConfig {
-        preset: Preset::Swarm,
-        fish: 20,
-        frames: 900,
-        seed: 33,
-        width: 320,
-        height: 192,
-        layout: Layout::None,
-        cohort: Cohort { mean_length_m: 0.35, length_cv: 0.1 },
-        ..SynthConfig::default()
-    };
-    generate(&cfg, &out, false, &|_| {}).unwrap();
-    let seq = Sequence::open(&out).unwrap();
+    let seq = scene(&dir, 900, 33, Layout::None);
     let r = evaluate(&seq, &Config::default(), &opts()).unwrap();
     assert_eq!(r.scale_source, "fish");
     let ratio = r.mean_est_mps / r.mean_true_mps;
@@ -109,20 +101,7 @@ fn auto_carries_the_references_scale_over_to_the_fish() {
     // (`depth.learn_fish_length`); when 8 of 10 are hidden, the fish fit goes on with that length, so
     // a configured length 10 % long costs (almost) nothing. Without the measured length it costs 10 %.
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("f");
-    let scene = SynthConfig {
-        preset: Preset::Swarm,
-        fish: 20,
-        frames: 300,
-        seed: 32,
-        width: 320,
-        height: 192,
-        layout: Layout::F,
-        cohort: Cohort { mean_length_m: 0.35, length_cv: 0.1 },
-        ..SynthConfig::default()
-    };
-    generate(&scene, &out, false, &|_| {}).unwrap();
-    let seq = Sequence::open(&out).unwrap();
+    let seq = scene(&dir, 300, 32, Layout::F);
     let mut cfg = Config::default();
     cfg.motion.body_length_m = Metres(0.385);
     let clean = evaluate(&seq, &cfg, &opts()).unwrap();
