@@ -12,6 +12,7 @@ import math
 import os
 import time
 
+import cv2
 import numpy as np
 import torch
 import torch.nn as nn
@@ -418,20 +419,47 @@ def kd_loss(r, t, heat, ignore=None):
     return ((kl * keep).sum() + rl) / fish_count(heat)
 
 
-def augment(img, boxes, rng, out):
+def augment(img, boxes, rng, out, color=False):
     """Horizontal flip and mild photometric jitter (the generator already varies water and light) of
     an HxWx3 uint8 image, written as float32 (0..255) into `out`; returns the boxes. Each step is one
     float32 operation, rounded as `img.astype(float32) * gain + bias` was before batches were built
-    in place."""
+    in place. With `color` (real footage: a handful of cameras and waters), each channel also gets
+    its own gain (the water's tint) and one frame in five a blur (focus, motion)."""
     if rng.random() < 0.5:
         img = img[:, ::-1]
         b = boxes.copy()
         b[:, 0] = img.shape[1] - b[:, 0] - b[:, 2]
         boxes = b
-    np.multiply(img, np.float32(rng.uniform(0.8, 1.2)), out=out)
+    if color:
+        if rng.random() < 0.2:
+            k = int(rng.choice([3, 5]))
+            img = cv2.GaussianBlur(np.ascontiguousarray(img), (k, k), 0)
+        gains = rng.uniform(0.75, 1.25, 3).astype(np.float32) * np.float32(rng.uniform(0.8, 1.2))
+        np.multiply(img, gains, out=out)
+    else:
+        np.multiply(img, np.float32(rng.uniform(0.8, 1.2)), out=out)
     np.add(out, np.float32(rng.uniform(-15, 15)), out=out)
     np.clip(out, 0, 255, out=out)
     return boxes
+
+
+def zoom_in(img, boxes, rng, max_zoom):
+    """A random window of 1/s of the frame (s log-uniform in 1..max_zoom) scaled back to the frame:
+    fish s times larger, as a camera close to the fish sees them (real tanks and cages show fish
+    filling a quarter of the frame, rarer in the training images). Returns the image, the boxes in
+    its pixels and which of them the window cuts (to be ignored, as `cut_by_window` says)."""
+    h, w = img.shape[:2]
+    s = math.exp(rng.uniform(0.0, math.log(max_zoom)))
+    ww, wh = w / s, h / s
+    ox, oy = rng.uniform(0, w - ww), rng.uniform(0, h - wh)
+    cut = cut_by_window(boxes, ox, oy, ww, wh, w, h)
+    m = np.float32([[s, 0, -ox * s], [0, s, -oy * s]])
+    out = cv2.warpAffine(np.ascontiguousarray(img), m, (w, h), flags=cv2.INTER_LINEAR, borderValue=(114, 114, 114))
+    b = boxes.copy()
+    b[:, 0] = (b[:, 0] - ox) * s
+    b[:, 1] = (b[:, 1] - oy) * s
+    b[:, 2:4] *= s
+    return out, b, cut
 
 
 def lr_at(opt, max_lr, step_frac, elapsed, budget):
@@ -470,7 +498,8 @@ def train_forward(model, x, bf16):
 
 
 def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=print, time_budget_s=None, spread=True,
-          giou_weight=1.0, sub=1, crop=None, arch="full", teacher=None, kd_weight=1.0):
+          giou_weight=1.0, sub=1, crop=None, arch="full", teacher=None, kd_weight=1.0, zoom=0.0, max_zoom=2.5,
+          color=None, init=None):
     """Returns the trained model and the number of epochs run (the time budget may stop it early).
 
     `crop` (w, h in input pixels, multiples of 32): each training frame is a random window of that
@@ -480,10 +509,14 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
     cells (`ignore_mask`). Without `crop` nothing changes: the same random draws, the same model.
 
     `teacher` (a FishDet with the same `sub`, e.g. `from_onnx` of the bundled detector): each batch also
-    runs through it, and `kd_weight` times `kd_loss` joins the loss (same random draws as without it)."""
+    runs through it, and `kd_weight` times `kd_loss` joins the loss (same random draws as without it).
+
+    `zoom` (real footage): the share of frames that `zoom_in` enlarges up to `max_zoom` times, fish the
+    window cuts ignored. `color`: a bool per image (or None: none) that gets `augment`'s colour jitter.
+    `init`: a FishDet to start from (fine-tuning) instead of random weights; `arch` is then its own."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    model = FishDet(sub=sub, **ARCHS[arch]).to(memory_format=torch.channels_last)
+    model = (init if init is not None else FishDet(sub=sub, **ARCHS[arch])).to(memory_format=torch.channels_last)
     bf16 = use_bf16()
     if teacher is not None:
         if teacher.sub != sub:
@@ -505,6 +538,13 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
     for ep in range(epochs):
         epochs_run = ep + 1
         model.train()
+        if init is not None:
+            # The exported weights have each BatchNorm folded into its convolution (`from_onnx`: identity
+            # statistics, eps 0); batch statistics would re-normalise the learnt activations, so a
+            # fine-tune keeps them frozen as the affine layers they are.
+            for mod in model.modules():
+                if isinstance(mod, nn.BatchNorm2d):
+                    mod.eval()
         perm = rng.permutation(n)
         tot = 0.0
         for i in range(0, n, batch):
@@ -515,6 +555,9 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
             hs, rs, ms, igs = [], [], [], []
             for k, j in enumerate(idx):
                 im, b = images[j], boxes[j]
+                zcut = None
+                if zoom and rng.random() < zoom:
+                    im, b, zcut = zoom_in(im, b, rng, max_zoom)
                 if crop:
                     # Offsets on the head's stride-4 grid; `targets` clips the kept boxes to the window.
                     ox = STRIDE * int(rng.integers(0, (im.shape[1] - win_w) // STRIDE + 1))
@@ -524,12 +567,17 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
                     b = b.copy()
                     b[:, 0] -= ox
                     b[:, 1] -= oy
-                b = augment(im, b, rng, xs[k])
-                if crop:
+                b = augment(im, b, rng, xs[k], color=bool(color[j]) if color is not None else False)
+                if crop or zoom:
                     # A fish the window cuts (not the frame) is neither a fish nor background: as a
                     # positive it taught the detector to box halves of whole fish.
-                    igs.append(ignore_mask(b[cut], gh, gw, model.stride))
-                    b = b[~cut]
+                    drop = np.zeros(len(b), bool)
+                    if crop:
+                        drop |= cut
+                    if zcut is not None:
+                        drop |= zcut
+                    igs.append(ignore_mask(b[drop], gh, gw, model.stride))
+                    b = b[~drop]
                 h, r, m = targets(b, gh, gw, min_vis, spread, model.stride)
                 hs.append(h)
                 rs.append(r)
@@ -538,7 +586,7 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
             x = torch.from_numpy(xs).permute(0, 3, 1, 2)
             out = train_forward(model, x, bf16)
             heat = torch.from_numpy(np.stack(hs))
-            ign = torch.from_numpy(np.stack(igs)) if crop else None
+            ign = torch.from_numpy(np.stack(igs)) if (crop or zoom) else None
             loss = loss_fn(out, heat, torch.from_numpy(np.stack(rs)), torch.from_numpy(np.stack(ms)), giou_weight, ign)
             if teacher is not None:
                 with torch.no_grad():

@@ -110,13 +110,13 @@ def match(dets, gt, thr=0.5):
     return tp, fp, fn
 
 
-def eval_detector(sess, images, boxes, conf=0.25):
+def eval_detector(sess, images, boxes, conf=0.25, iou=0.7):
     name = sess.get_inputs()[0].name
     tp = fp = fn = 0
     for img, g in zip(images, boxes):
         x = (img.astype(np.float32).transpose(2, 0, 1)[None] / 255.0)
         out = sess.run(None, {name: x})[0]
-        d, _ = decode(out, conf)
+        d, _ = decode(out, conf, iou)
         a, b, c = match(d, clip_gt(g))
         tp, fp, fn = tp + a, fp + b, fn + c
     p = tp / max(tp + fp, 1)

@@ -1,0 +1,172 @@
+#!/usr/bin/env python3
+"""Trains the detector on real labelled fish images and fme's renders, exports and quantises it,
+and reports precision / recall per source on each source's held-out split (docs/training.md
+"Real footage"; `make -C training real`).
+
+    python train_real.py --real ../../shared/realfish/train --synth DATA --out DIR [--budget-s S]
+    python train_real.py --finetune DIR [DIR ...] --base ../models/fish_det_fp32.onnx --out OUT
+
+The renders (DATA/train, DATA/val: sequences `fme synth` wrote, as train.sh makes them) keep the
+detector's synthetic quality; the real pool teaches it real fish. Writes OUT/fish_det_fp32.onnx,
+OUT/fish_det_int8.onnx and OUT/metrics.json (training record, per-source P / R at several
+confidences, timings). Nothing here reads the evaluation sequence mf25-seq2.
+
+Fine-tuning (`make -C training finetune DATA=DIR`): starts from --base (the bundled fp32 detector),
+trains on DIR's training part for --budget-s seconds at a lower learning rate, and reports P / R on
+DIR's held-out part (real.held_out: blocks of frames, not single frames) before and after.
+"""
+import argparse
+import json
+import os
+import shutil
+import time
+
+import numpy as np
+import torch
+
+import data
+import det
+import evaluate
+import real
+from train import quantize_and_time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+CONFS = (0.2, 0.25, 0.3, 0.35, 0.4, 0.5)
+# Oversampling per source (copies per epoch): the aquarium's large close fish and the zebrafish tank
+# are the closest to a farm tank, and few.
+REPEAT = {"aquarium": 2, "zebrafish-lab": 3}
+
+
+def per_source_quality(path, val, nms_iou, log, tag):
+    """{source: [P/R per confidence]} of one ONNX file on each held-out split."""
+    sess = evaluate.session(path)
+    out = {}
+    for name, (images, boxes) in val.items():
+        if len(images) == 0:
+            continue
+        out[name] = [dict(evaluate.eval_detector(sess, images, boxes, c, nms_iou), n_images=len(images),
+                          n_boxes=int(sum(len(b) for b in boxes))) for c in CONFS]
+        at = {m["conf"]: m for m in out[name]}
+        log(f"{tag} {name}: " + ", ".join(f"conf {c}: P {at[c]['precision']:.3f} R {at[c]['recall']:.3f}"
+                                          for c in (0.25, 0.3, 0.4)))
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--real", default=os.environ.get("REAL_DATA", os.path.join(HERE, "..", "..", "shared", "realfish", "train")))
+    ap.add_argument("--synth", default="", help="folder with train/ and val/ fme sequences (renders); empty: none")
+    ap.add_argument("--synth-seqs", type=int, default=240, help="training render sequences used")
+    ap.add_argument("--finetune", nargs="*", default=None, help="fine-tune on these folders instead")
+    ap.add_argument("--base", default=os.path.join(HERE, "..", "models", "fish_det_fp32.onnx"))
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--arch", default="full", choices=sorted(det.ARCHS))
+    ap.add_argument("--epochs", type=int, default=40)
+    ap.add_argument("--budget-s", type=float, default=4000)
+    ap.add_argument("--lr", type=float, default=None, help="default 2e-3 (3e-4 when fine-tuning)")
+    ap.add_argument("--zoom", type=float, default=0.35, help="share of real frames enlarged (det.zoom_in)")
+    ap.add_argument("--max-zoom", type=float, default=2.5)
+    ap.add_argument("--nms-iou", type=float, default=0.5, help="as fme's [detector] nms_iou")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--limit", type=int, default=0, help="at most N images per source (smoke tests)")
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    os.makedirs(args.out, exist_ok=True)
+    log_lines = []
+
+    def log(msg):
+        print(msg, flush=True)
+        log_lines.append(msg)
+
+    t0 = time.time()
+    finetune = args.finetune is not None
+    if finetune:
+        if not args.finetune:
+            raise SystemExit("--finetune: name at least one folder (make -C training finetune DATA=DIR)")
+        train_sets, val = {}, {}
+        for folder in args.finetune:
+            for name, v in real.load_any(folder, "train").items():
+                train_sets[f"{os.path.basename(os.path.abspath(folder))}/{name}"] = v
+            for name, v in real.load_any(folder, "val").items():
+                val[f"{os.path.basename(os.path.abspath(folder))}/{name}"] = v
+        if sum(len(v[0]) for v in train_sets.values()) == 0:
+            raise SystemExit(f"{' '.join(args.finetune)}: no training images after the held-out split")
+        if sum(len(v[0]) for v in val.values()) == 0:
+            log("finetune: no held-out images (too few frames for a held-out block); P / R on the training part")
+            val = train_sets
+        sources = {}
+    else:
+        sources = {s: open(os.path.join(args.real, s, "SOURCE.md")).readline().strip("# \n")
+                   for s in real.sources(args.real)}
+        train_sets = real.load_pool(args.real, "train", args.limit)
+        val = real.load_pool(args.real, "val", args.limit)
+    imgs, boxes, color = [], [], []
+    for name, (im, bx) in train_sets.items():
+        k = 1 if finetune else REPEAT.get(name, 1)
+        for _ in range(k):
+            imgs.append(im)
+            boxes.extend(bx)
+            color.extend([True] * len(im))
+    n_real = sum(len(b) for b in imgs)
+    synth_info = None
+    if args.synth and not finetune:
+        s_imgs, s_boxes, _, s_seqs = data.load_many(os.path.join(args.synth, "train"), every=3, with_depth=False,
+                                                    limit=args.synth_seqs)
+        imgs.append(s_imgs)
+        boxes.extend(s_boxes)
+        color.extend([False] * len(s_imgs))
+        v_imgs, v_boxes, _, v_seqs = data.load_many(os.path.join(args.synth, "val"), every=5, with_depth=False)
+        val["renders"] = (v_imgs, v_boxes)
+        synth_info = {"train_sequences": len(s_seqs), "train_frames": int(len(s_imgs)),
+                      "val_sequences": len(v_seqs), "val_frames": int(len(v_imgs))}
+    images = np.concatenate(imgs)
+    log(f"data: {n_real} real training images ({', '.join(f'{k} {len(v[0])}' for k, v in train_sets.items())}), "
+        f"{len(images) - n_real} renders; held out: {', '.join(f'{k} {len(v[0])}' for k, v in val.items())} "
+        f"({time.time() - t0:.0f} s)")
+
+    init = det.from_onnx(args.base, 2) if finetune else None
+    fp32 = os.path.join(args.out, "fish_det_fp32.onnx")
+    before = None
+    if finetune:
+        before = per_source_quality(args.base, val, args.nms_iou, log, "before")
+    lr = args.lr if args.lr is not None else (3e-4 if finetune else 2e-3)
+    t1 = time.time()
+    model, epochs_run = det.train(images, boxes, args.epochs, lr=lr, log=log, time_budget_s=args.budget_s, sub=2,
+                                  arch=args.arch, zoom=args.zoom, max_zoom=args.max_zoom, color=np.array(color),
+                                  init=init)
+    train_s = time.time() - t1
+    det.export(model, fp32, data.NET_H, data.NET_W)
+    res = {"train_seconds": round(train_s, 1), "epochs": args.epochs, "epochs_run": epochs_run, "lr": lr,
+           "autocast": "bf16" if det.use_bf16() else "fp32", "input": [data.NET_W, data.NET_H],
+           "output_stride": model.stride, "arch": "finetuned" if finetune else args.arch,
+           "budget_s": args.budget_s, "zoom": args.zoom, "max_zoom": args.max_zoom, "float_stem": True,
+           "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2),
+           "data": {"real_train": {k: len(v[0]) for k, v in train_sets.items()},
+                    "held_out": {k: len(v[0]) for k, v in val.items()}, "renders": synth_info,
+                    "repeat": REPEAT if not finetune else {}, "sources": sources,
+                    "excluded": sorted(real.EXCLUDED) if not finetune else [],
+                    "held_out_percent": real.HELD_OUT_PERCENT}}
+    if finetune:
+        res["base"] = os.path.basename(args.base)
+        res["before"] = before
+    calib_idx = np.random.default_rng(1).choice(len(images), size=min(64, len(images)), replace=False)
+    calib = [images[i].astype(np.float32).transpose(2, 0, 1) / 255.0 for i in calib_idx]
+    paths, ms = quantize_and_time(args.out, "fish_det", fp32, calib, "images", res, float_stem=True)
+    for tag, path in paths.items():
+        res[tag] = {"size_mb": round(os.path.getsize(path) / 1e6, 2), "ms_1_thread": ms[1][path],
+                    "ms_2_threads": ms[2][path], "quality": per_source_quality(path, val, args.nms_iou, log, tag)}
+    a, b = res["int8_u8s8"], res["int8_s8s8"]
+    kept = "u8s8" if a["ms_2_threads"][0] <= b["ms_2_threads"][0] else "s8s8"
+    shutil.copyfile(os.path.join(args.out, f"fish_det_int8_{kept}.onnx"), os.path.join(args.out, "fish_det_int8.onnx"))
+    for t in ("u8s8", "s8s8"):
+        os.remove(os.path.join(args.out, f"fish_det_int8_{t}.onnx"))
+    res["int8_kept"] = kept
+    res["torch"] = torch.__version__
+    res["log"] = log_lines
+    with open(os.path.join(args.out, "metrics.json"), "w") as f:
+        json.dump(res, f, indent=1)
+    log(f"done in {time.time() - t0:.0f} s: {fp32}, fish_det_int8.onnx ({kept}), metrics.json in {args.out}")
+
+
+if __name__ == "__main__":
+    main()
