@@ -4,12 +4,17 @@
 CARGO ?= cargo
 BIN := target/release/fme
 
-.PHONY: all setup build static static-copy static-check test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer bench-history bench-mqtt bench-backends bench-anchors four-groups clean
+.PHONY: all setup setup-training build static static-copy static-check test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer bench-history bench-mqtt bench-backends bench-anchors four-groups clean
 
 all: build
 
 setup:
 	@bash scripts/setup.sh
+
+# The training Python stack (training/requirements.txt, about 6 GB, in VENV, default /tmp/venv-infer):
+# the fine-tuning test needs it; `make demo` does not.
+setup-training:
+	@bash scripts/setup_training.sh
 
 build: setup
 	$(CARGO) build --release --locked
@@ -47,7 +52,7 @@ static-check: setup
 
 # Unit, integration and doc tests. Benchmarks are built by `make lint` (clippy --all-targets) but
 # only run by `make bench`: a benchmark measures speed, it is not a test.
-test: setup
+test: setup setup-training
 	$(CARGO) test --locked --lib --bins --tests
 	$(CARGO) test --locked --doc
 

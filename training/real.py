@@ -27,6 +27,8 @@ import data
 EXCLUDED = {"jp-piers-partial"}
 # Share of each source's groups held out (by a hash of the group name: stable across runs and machines).
 HELD_OUT_PERCENT = 12
+# Share of a recording's frames (its last ones) held out when fine-tuning on it.
+MOT_HELD_OUT = 0.15
 IMAGE_EXT = (".jpg", ".jpeg", ".png", ".bmp")
 
 
@@ -142,8 +144,9 @@ def load_mot(seq, split=None, every=1):
     """A MOTChallenge folder (a black-box recording or CVAT's MOT 1.1 export) at the network size:
     frames with a gt row, or every frame when the sequence has a gt file (an unlabelled frame of a
     labelled sequence is an image without fish). CVAT MOT rows: frame, id, x, y, w, h, not-ignored,
-    class, visibility; rows marked ignored (7th column 0) are dropped. The held-out split takes
-    blocks of 150 frames."""
+    class, visibility; rows marked ignored (7th column 0) are dropped. The held-out split is the
+    last MOT_HELD_OUT of the frames: one stretch of the recording, never the neighbours of a
+    training frame."""
     gt = {}
     gt_path = os.path.join(seq, "gt", "gt.txt")
     if not os.path.exists(gt_path):
@@ -165,13 +168,16 @@ def load_mot(seq, split=None, every=1):
     n_max = seq_length(seq)
     img_dir = os.path.join(seq, "img1")
     names = sorted(n for n in os.listdir(img_dir) if n.lower().endswith(IMAGE_EXT) and n[0].isdigit())
+    if n_max:
+        names = [n for n in names if int(os.path.splitext(n)[0]) <= n_max]
+    first_val = int(len(names) * (1.0 - MOT_HELD_OUT))
     imgs, boxes, stems = [], [], []
     for i, name in enumerate(names):
         fr = int(os.path.splitext(name)[0])
-        if (n_max and fr > n_max) or i % every:
+        if i % every:
             continue
         stem = f"{os.path.basename(seq)}_{fr:06d}"
-        if split is not None and held_out("mot", stem) != (split == "val"):
+        if split is not None and (i >= first_val) != (split == "val"):
             continue
         im, _wh, lb = letterboxed(os.path.join(img_dir, name))
         imgs.append(im)
