@@ -4,6 +4,7 @@ and reports precision / recall per source on each source's held-out split (docs/
 "Real footage"; `make -C training real`).
 
     python train_real.py --real ../../shared/realfish/train --synth DATA --out DIR [--budget-s S]
+    python train_real.py --real ... --synth DATA --init DIR/stage1/fish_det_fp32.onnx --lr 5e-4 --seed 1 --out DIR
     python train_real.py --finetune DIR [DIR ...] --base ../models/fish_det_fp32.onnx --out OUT
 
 The renders (DATA/train, DATA/val: sequences `fme synth` wrote, as train.sh makes them) keep the
@@ -59,6 +60,8 @@ def main():
     ap.add_argument("--synth-seqs", type=int, default=240, help="training render sequences used")
     ap.add_argument("--finetune", nargs="*", default=None, help="fine-tune on these folders instead")
     ap.add_argument("--base", default=os.path.join(HERE, "..", "models", "fish_det_fp32.onnx"))
+    ap.add_argument("--init", default="", help="an fp32 detector to go on training from (the recipe's second stage)")
+    ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", required=True)
     ap.add_argument("--arch", default="full", choices=sorted(det.ARCHS))
     ap.add_argument("--epochs", type=int, default=40)
@@ -124,7 +127,7 @@ def main():
         f"{len(images) - n_real} renders; held out: {', '.join(f'{k} {len(v[0])}' for k, v in val.items())} "
         f"({time.time() - t0:.0f} s)")
 
-    init = det.from_onnx(args.base, 2) if finetune else None
+    init = det.from_onnx(args.base, 2) if finetune else det.from_onnx(args.init, 2) if args.init else None
     fp32 = os.path.join(args.out, "fish_det_fp32.onnx")
     before = None
     if finetune:
@@ -133,7 +136,7 @@ def main():
     t1 = time.time()
     model, epochs_run = det.train(images, boxes, args.epochs, lr=lr, log=log, time_budget_s=args.budget_s, sub=2,
                                   arch=args.arch, zoom=args.zoom, max_zoom=args.max_zoom, color=np.array(color),
-                                  init=init)
+                                  init=init, seed=args.seed)
     train_s = time.time() - t1
     det.export(model, fp32, data.NET_H, data.NET_W)
     res = {"train_seconds": round(train_s, 1), "epochs": args.epochs, "epochs_run": epochs_run, "lr": lr,
@@ -146,6 +149,9 @@ def main():
                     "repeat": REPEAT if not finetune else {}, "sources": sources,
                     "excluded": sorted(real.EXCLUDED) if not finetune else [],
                     "held_out_percent": real.HELD_OUT_PERCENT}}
+    if args.init and not finetune:
+        res["init"] = args.init
+    res["seed"] = args.seed
     if finetune:
         res["base"] = os.path.basename(args.base)
         res["before"] = before
