@@ -492,11 +492,12 @@ fn bad_input_names_file_and_line_and_exits_non_zero() {
     std::fs::write(&gt, g.join("\n") + "\n").unwrap();
     fails_with(&[], &dir, &["gt.txt:2"]);
     std::fs::write(&gt, &good_gt).unwrap();
-    // A missing depth map, then a missing meta.json.
+    // A missing depth map, then a meta.json without a camera (a meta.json is optional, but one
+    // that is there must be a calibration).
     std::fs::remove_file(dir.join("depth/000007.png")).unwrap();
     fails_with(&[], &dir, &["000007.png", "missing"]);
-    std::fs::remove_file(dir.join("meta.json")).unwrap();
-    fails_with(&[], &dir, &["meta.json"]);
+    std::fs::write(dir.join("meta.json"), "{\"fps\": 30}").unwrap();
+    fails_with(&[], &dir, &["meta.json", "camera"]);
     fails_with(&[], &tmp.path().join("nowhere"), &["nowhere"]);
     // Bad option values are usage errors (exit code 2).
     // Bad option values are usage errors (exit code 2) that name the key, on a valid sequence.

@@ -37,7 +37,7 @@ fn opts() -> EvalOptions {
 fn the_fish_fit_recovers_the_scale_without_references() {
     let dir = tempfile::tempdir().unwrap();
     let seq = scene(&dir, 150, 31, Layout::None);
-    assert!(seq.meta.reference_objects.is_empty());
+    assert!(seq.meta.as_ref().expect("meta.json").reference_objects.is_empty());
     let r = evaluate(&seq, &Config::default(), &opts()).unwrap();
     assert_eq!(r.scale_source, "fish");
     assert_eq!(r.references_visible, 0);

@@ -101,6 +101,93 @@ async fn frozen_recording_replays_to_the_recorded_series() {
     assert_eq!(recorded.lines().count(), replay.lines().count());
 }
 
+/// The commissioning path: the daemon runs on a calibration made by `fme calibrate` (the camera and
+/// the references; none of the synthetic scene's fields), freezes its black box, and `fme eval`
+/// opens the recording as it is: the activity in m/s and BL/s on the references' scale, with the
+/// scores it cannot give named; once the boxes are labelled (`gt/gt.txt`), detection and tracking.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_recording_frozen_on_an_fme_calibrate_calibration_opens_in_fme_eval() {
+    std::env::set_current_dir(env!("CARGO_MANIFEST_DIR")).expect("cd");
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let meta_path = Path::new(SEQ).join("meta.json");
+    let m = fme::sequence::Meta::read(&meta_path).expect("swarm20 meta.json");
+    let cam = m.camera(&meta_path).expect("camera");
+    let mut points = String::from("name,x,y,z,u,v\n");
+    for r in &m.reference_objects {
+        let (w, px) = (r.front_face_center(), cam.world_to_pixel(&r.front_face_center()).expect("in view"));
+        points += &format!("cube{},{},{},{},{:.3},{:.3}\n", r.id, w.0.x, w.0.y, w.0.z, px.u, px.v);
+    }
+    let csv = tmp.path().join("points.csv");
+    std::fs::write(&csv, points).expect("points.csv");
+    let calib = tmp.path().join("calib.json");
+    let out = fme()
+        .args(["calibrate", "--frame", "tests/data/swarm20/img1/000001.jpg", "--intrinsics"])
+        .arg(&meta_path)
+        .arg("--points")
+        .arg(&csv)
+        .arg("--out")
+        .arg(&calib)
+        .output()
+        .expect("run fme calibrate");
+    assert!(out.status.success(), "fme calibrate: {}", String::from_utf8_lossy(&out.stderr));
+
+    let state = tmp.path().join("state");
+    let sets: Vec<String> = [
+        format!("source.path=\"{SEQ}\""),
+        format!("camera.calibration=\"{}\"", calib.display()),
+        "source.realtime=false".into(),
+        "source.loop=false".into(),
+        "output.modbus.mode=\"off\"".into(),
+        "service.systemd_notify=false".into(),
+        format!("service.state_dir=\"{}\"", state.display()),
+        "record.ring_s=1000.0".into(),
+    ]
+    .into();
+    let (cfg, text) = Config::load_with(Some(Path::new("config/fme.toml")), &sets).expect("config");
+    let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(Path::new(SEQ), false, false).expect("open"));
+    let pipeline = fme::service::build_pipeline(&cfg).expect("real pipeline");
+    let opts = RunOptions { max_frames: None, series: None };
+    let mut daemon = Daemon::start(cfg, text, source, pipeline, opts).await.expect("start");
+    assert!(tokio::time::timeout(Duration::from_secs(120), daemon.finished()).await.expect("ends"));
+    daemon.shared().requests.request_save("commissioning");
+    let mut found = Vec::new();
+    for _ in 0..300 {
+        found = recordings(&state);
+        if !found.is_empty() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let h = daemon.shared().health();
+    daemon.shutdown().await;
+    assert_eq!(found.len(), 1, "one recording: {found:?} ({:?})", h.record);
+    let rec = &found[0];
+    // The recording carries the calibration as `fme calibrate` wrote it.
+    let kept = std::fs::read_to_string(rec.join("meta.json")).expect("the recording's meta.json");
+    assert_eq!(kept, std::fs::read_to_string(&calib).expect("calib.json"));
+    assert!(!kept.contains("\"fps\"") && !kept.contains("\"generator\"") && kept.contains("\"calibrate\""));
+
+    let eval = |args: &[&str]| -> serde_json::Value {
+        let out = fme().args(["eval", "--json", "--sequence"]).arg(rec).args(args).output().expect("run fme eval");
+        assert!(out.status.success(), "fme eval {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice(&out.stdout).expect("JSON")
+    };
+    let j = eval(&["--boxes", "model", "--depth", "model"]);
+    assert_eq!(j["scale_source"], "references", "{j}");
+    assert!(j["mean_activity_mps"].as_f64().is_some_and(|a| a > 0.0), "{j}");
+    assert!(j["mean_activity_bls"].as_f64().is_some_and(|a| a > 0.0), "{j}");
+    let absent = j["absent"].to_string();
+    assert!(absent.contains("gt/gt.txt") && absent.contains("gt/world.csv"), "{absent}");
+    assert!(j["detection"].is_null() && j["mota"].is_null(), "{j}");
+    // Boxes labelled afterwards (MOTChallenge gt.txt): detection and tracking are scored too.
+    std::fs::create_dir_all(rec.join("gt")).expect("gt/");
+    std::fs::copy(Path::new(SEQ).join("gt/gt.txt"), rec.join("gt/gt.txt")).expect("label the boxes");
+    let j = eval(&["--boxes", "model", "--depth", "model"]);
+    assert!(j["detection"]["recall"].as_f64().is_some_and(|r| r > 0.9), "{j}");
+    assert!(j["mota"].as_f64().is_some_and(|m| m > 0.8), "{j}");
+    assert!(j["depth_consistency"].as_f64().is_some(), "{j}");
+}
+
 /// `fme run` in a child process whose files may not grow past 4 kB (RLIMIT_FSIZE, SIGXFSZ ignored:
 /// every ring frame write fails with EFBIG, like a full disk): the PLC still sees the heartbeat
 /// and the activity update, status bit 7 (recording fault) is set, and the error is logged once.

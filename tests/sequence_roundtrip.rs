@@ -95,7 +95,7 @@ fn written_sequence_loads_back_identically() {
     assert_eq!(seq.info, info());
     // serde_json (without its `float_roundtrip` feature) may move the last bit of a float.
     let mut want = meta();
-    let (a, b) = (&seq.meta.camera, &want.camera);
+    let (a, b) = (&seq.meta.as_ref().expect("meta.json").camera, &want.camera);
     let close = |x: f64, y: f64| (x - y).abs() <= 1e-12 * (1.0 + y.abs());
     assert!(close(a.fx, b.fx) && close(a.fy, b.fy) && close(a.cx, b.cx) && close(a.cy, b.cy));
     for i in 0..3 {
@@ -105,12 +105,12 @@ fn written_sequence_loads_back_identically() {
         }
     }
     want.camera = a.clone();
-    assert_eq!(seq.meta, want);
+    assert_eq!(seq.meta.as_ref(), Some(&want));
     let (gt, world) = rows();
     assert_eq!(seq.gt, gt);
     assert_eq!(seq.world, world);
     let p = WorldPoint::new(3.1, 2.0, 1.0);
-    let (u, v) = (seq.camera.world_to_pixel(&p).unwrap(), camera().world_to_pixel(&p).unwrap());
+    let (u, v) = (seq.camera.expect("camera").world_to_pixel(&p).unwrap(), camera().world_to_pixel(&p).unwrap());
     assert!((u.u - v.u).abs() < 1e-9 && (u.v - v.v).abs() < 1e-9);
     assert_eq!(seq.frame_paths().len(), N as usize);
     let d = seq.read_depth(2).unwrap();
@@ -163,6 +163,46 @@ fn reader_names_the_file_at_fault() {
     std::fs::write(tmp.path().join("seq2/meta.json"), "{\"fps\": 30}").unwrap();
     let err = Sequence::open(tmp.path().join("seq2")).unwrap_err().to_string();
     assert!(err.contains("meta.json") && err.contains("missing field"), "{err}");
+}
+
+/// What a real recording has opens: a plain MOTChallenge folder (no meta.json, no depth/, no
+/// world.csv), then with a calibration as `fme calibrate` writes it (camera, references, size; no
+/// fps, frames, generator or water), whose frame rate comes from seqinfo.ini.
+#[test]
+fn a_plain_motchallenge_folder_and_a_calibration_only_meta_json_open() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("seq");
+    write_sequence(&dir);
+    for p in ["meta.json", "gt/world.csv"] {
+        std::fs::remove_file(dir.join(p)).unwrap();
+    }
+    std::fs::remove_dir_all(dir.join("depth")).unwrap();
+    // Images beyond seqLength are not part of the sequence.
+    std::fs::copy(dir.join("img1/000001.jpg"), dir.join("img1/000004.jpg")).unwrap();
+    let seq = Sequence::open(&dir).unwrap();
+    assert!(seq.meta.is_none() && seq.camera.is_none() && seq.reference_objects().is_empty());
+    assert!(seq.has_gt && !seq.has_depth && seq.world.is_empty());
+    assert_eq!((seq.len(), seq.frame_paths().len(), seq.gt.len()), (N, N as usize, N as usize));
+    assert!((seq.timestamp(3).0 - 2.0 / 30.0).abs() < 1e-12);
+
+    let calib = serde_json::json!({
+        "width": W, "height": H,
+        "camera": CameraMeta::from_camera(&camera()),
+        "reference_objects": meta().reference_objects,
+        "calibrate": {"rms_px": 0.3},
+    });
+    std::fs::write(dir.join("meta.json"), calib.to_string()).unwrap();
+    std::fs::remove_file(dir.join("gt/gt.txt")).unwrap();
+    let seq = Sequence::open(&dir).unwrap();
+    let m = seq.meta.as_ref().expect("meta.json");
+    assert_eq!((m.fps, m.width, m.height, m.frames), (30.0, W, H, N));
+    assert_eq!(m.reference_objects.len(), 1);
+    assert!(seq.camera.is_some() && !seq.has_gt && seq.gt.is_empty());
+    // A stated size that disagrees with seqinfo.ini is still an error naming meta.json.
+    let wrong = serde_json::json!({"width": W + 1, "camera": CameraMeta::from_camera(&camera())});
+    std::fs::write(dir.join("meta.json"), wrong.to_string()).unwrap();
+    let err = Sequence::open(&dir).unwrap_err().to_string();
+    assert!(err.contains("meta.json") && err.contains("disagree"), "{err}");
 }
 
 #[test]

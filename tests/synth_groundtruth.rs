@@ -37,8 +37,8 @@ fn swarm_ground_truth_is_self_consistent() {
     let tmp = tempfile::tempdir().unwrap();
     let seq = swarm(&tmp.path().join("swarm"));
     assert_eq!(seq.len(), 24);
-    assert_eq!(seq.meta.reference_objects.len(), 10);
-    assert_eq!(seq.meta.fish, Some(40));
+    assert_eq!(seq.meta.as_ref().expect("meta.json").reference_objects.len(), 10);
+    assert_eq!(seq.meta.as_ref().expect("meta.json").fish, Some(40));
     assert_eq!(seq.world.len(), 24 * 40);
     assert!(!seq.gt.is_empty());
 
@@ -46,7 +46,7 @@ fn swarm_ground_truth_is_self_consistent() {
     // The body centre of every fish in the image projects inside its amodal box.
     for g in &seq.gt {
         let w = world[&(g.frame, g.id)];
-        let px = seq.camera.world_to_pixel(&w.position).unwrap();
+        let px = seq.camera.expect("camera").world_to_pixel(&w.position).unwrap();
         assert!(g.bbox.contains(px), "frame {} fish {}: centre {px:?} outside {:?}", g.frame, g.id, g.bbox);
         assert!((w.visibility - g.visibility).abs() < 1e-4);
         assert!(g.bbox.w > 1.0 && g.bbox.h > 1.0);
@@ -56,7 +56,7 @@ fn swarm_ground_truth_is_self_consistent() {
     assert!(seq.gt.iter().filter(|g| g.visibility > 0.99).count() > seq.gt.len() / 3);
 
     // Central finite differences of the positions match the recorded velocities.
-    let dt = 1.0 / seq.meta.fps;
+    let dt = 1.0 / seq.meta.as_ref().expect("meta.json").fps;
     let mut worst: f64 = 0.0;
     for f in 2..seq.len() {
         for id in 1..=40 {
@@ -76,12 +76,12 @@ fn swarm_ground_truth_is_self_consistent() {
         let depth = seq.read_depth(f).unwrap();
         for g in seq.gt_of_frame(f).filter(|g| g.visibility == 1.0) {
             let w = world[&(f, g.id)];
-            let px = seq.camera.world_to_pixel(&w.position).unwrap();
+            let px = seq.camera.expect("camera").world_to_pixel(&w.position).unwrap();
             if px.u < 0.0 || px.v < 0.0 {
                 continue;
             }
             let Some(d) = depth.get(px.u as u32, px.v as u32) else { continue };
-            let zc = seq.camera.pose.to_camera(&w.position).depth().0;
+            let zc = seq.camera.expect("camera").pose.to_camera(&w.position).depth().0;
             assert!(
                 d.0 <= zc + 0.001 && d.0 >= zc - 0.5 * w.length.0,
                 "frame {f} fish {}: depth {d} vs centre {zc}",
@@ -100,13 +100,13 @@ fn distorted_camera_keeps_centres_inside_boxes() {
     c.k1 = -0.06;
     generate(&c, &tmp.path().join("d"), false, &|_| {}).unwrap();
     let seq = Sequence::open(tmp.path().join("d")).unwrap();
-    assert_eq!(seq.camera.intrinsics.distortion[0], -0.06);
+    assert_eq!(seq.camera.expect("camera").intrinsics.distortion[0], -0.06);
     c.k1 = -0.2;
     let err = generate(&c, &tmp.path().join("e"), false, &|_| {}).unwrap_err().to_string();
     assert!(err.contains("--k1"), "{err}");
     let world: BTreeMap<(u32, u32), _> = seq.world.iter().map(|r| ((r.frame, r.id), r)).collect();
     for g in &seq.gt {
-        let px = seq.camera.world_to_pixel(&world[&(g.frame, g.id)].position).unwrap();
+        let px = seq.camera.expect("camera").world_to_pixel(&world[&(g.frame, g.id)].position).unwrap();
         assert!(g.bbox.contains(px), "centre {px:?} outside {:?}", g.bbox);
     }
 }
@@ -117,13 +117,14 @@ fn reference_cube_front_faces_match_the_depth_map() {
     let seq = swarm(&tmp.path().join("swarm"));
     let depth = seq.read_depth(1).unwrap();
     let mut matched = 0;
-    let eye = seq.camera.pose.camera_center().0;
-    for c in &seq.meta.reference_objects {
+    let eye = seq.camera.expect("camera").pose.camera_center().0;
+    for c in &seq.meta.as_ref().expect("meta.json").reference_objects {
         let f = c.front_face_center();
-        let px = seq.camera.world_to_pixel(&f).unwrap();
+        let px = seq.camera.expect("camera").world_to_pixel(&f).unwrap();
         let (i, j) = (px.u.floor(), px.v.floor());
         // Camera z where the ray through that pixel's centre meets the plane of the front face.
-        let ray = seq.camera.pose.rotation.transpose() * seq.camera.intrinsics.ray(Pixel::new(i + 0.5, j + 0.5));
+        let ray = seq.camera.expect("camera").pose.rotation.transpose()
+            * seq.camera.expect("camera").intrinsics.ray(Pixel::new(i + 0.5, j + 0.5));
         let axis = (0..3).find(|&a| (c.front_face_center_w[a] - c.center_w[a]).abs() > 1e-9).unwrap();
         let z = (c.front_face_center_w[axis] - eye[axis]) / ray[axis];
         let hit = eye + ray * z;
@@ -241,10 +242,10 @@ fn postproc_suite_has_eighteen_scenes_and_occluded_ones_are_occluded() {
         assert_eq!(fish1.len(), 30);
         let min = fish1.iter().cloned().fold(1.0, f64::min);
         if name.ends_with("-occ") {
-            assert_eq!(seq.meta.fish, Some(2));
+            assert_eq!(seq.meta.as_ref().expect("meta.json").fish, Some(2));
             assert!(min < 0.6, "{name}: fish 1 never hidden (min visibility {min})");
         } else {
-            assert_eq!(seq.meta.fish, Some(1));
+            assert_eq!(seq.meta.as_ref().expect("meta.json").fish, Some(1));
             assert!(min > 0.99, "{name}: single fish not fully visible (min {min})");
         }
         // Speed follows the profile: accelerating scenes end faster than they start.

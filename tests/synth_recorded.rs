@@ -15,14 +15,14 @@ fn data() -> PathBuf {
 fn recorded_swarm_loads_and_is_consistent() {
     let seq = Sequence::open(data()).unwrap();
     assert_eq!((seq.len(), seq.info.im_width, seq.info.im_height), (120, 640, 384));
-    assert_eq!(seq.meta.fish, Some(20));
-    assert_eq!(seq.meta.preset, "swarm");
+    assert_eq!(seq.meta.as_ref().expect("meta.json").fish, Some(20));
+    assert_eq!(seq.meta.as_ref().expect("meta.json").preset, "swarm");
     assert_eq!(seq.world.len(), 120 * 20);
     assert!(seq.has_depth && seq.depth_paths().len() == 120);
     let world: BTreeMap<(u32, u32), _> = seq.world.iter().map(|r| ((r.frame, r.id), r)).collect();
     for g in &seq.gt {
         let w = world[&(g.frame, g.id)];
-        assert!(g.bbox.contains(seq.camera.world_to_pixel(&w.position).unwrap()));
+        assert!(g.bbox.contains(seq.camera.expect("camera").world_to_pixel(&w.position).unwrap()));
     }
     let depth = seq.read_depth(60).unwrap();
     assert!(depth.mm.iter().all(|&v| v > 0), "the closed pond gives depth everywhere");

@@ -2,6 +2,7 @@
 //! sequence's frame rate and looping (like a camera that never stops), or as fast as possible.
 
 use super::{CaptureError, Frame, FrameSource, PixelFormat};
+use crate::sequence::{SeqInfo, frame_file_name};
 use crate::units::Seconds;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -21,48 +22,45 @@ pub struct RecordedSource {
     start: Option<Instant>,
 }
 
-/// Reads `key=value` from a `seqinfo.ini` text.
-fn ini_value<'a>(text: &'a str, key: &str) -> Option<&'a str> {
-    text.lines().find_map(|l| {
-        let (k, v) = l.split_once('=')?;
-        (k.trim().eq_ignore_ascii_case(key)).then(|| v.trim())
-    })
-}
-
 impl RecordedSource {
     /// Opens a sequence directory. `realtime` paces frames at `frameRate`; `looping` restarts at the end.
+    /// `seqinfo.ini` is read by the sequence reader's parser ([`SeqInfo`]); the sequence is its first
+    /// `seqLength` frames, `imDir/000001imExt` on (more images in the folder are not part of it).
     pub fn open(dir: &Path, realtime: bool, looping: bool) -> Result<Self, CaptureError> {
         let open_err = |message: String| CaptureError::Open { path: dir.to_path_buf(), message };
         if !dir.is_dir() {
             return Err(CaptureError::NotFound { path: dir.to_path_buf() });
         }
         let ini_path = dir.join("seqinfo.ini");
-        let ini = std::fs::read_to_string(&ini_path).map_err(|e| open_err(format!("{}: {e}", ini_path.display())))?;
-        let fps: f64 = ini_value(&ini, "frameRate")
-            .and_then(|v| v.parse().ok())
-            .filter(|f: &f64| f.is_finite() && *f > 0.0)
-            .ok_or_else(|| open_err(format!("{}: missing or invalid frameRate", ini_path.display())))?;
-        let im_dir = ini_value(&ini, "imDir").unwrap_or("img1");
-        let ext = ini_value(&ini, "imExt").unwrap_or(".jpg").to_ascii_lowercase();
-        let img_dir = dir.join(im_dir);
-        let entries = std::fs::read_dir(&img_dir).map_err(|e| open_err(format!("{}: {e}", img_dir.display())))?;
-        let mut files: Vec<PathBuf> = entries
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| {
-                p.extension().map(|x| format!(".{}", x.to_string_lossy().to_ascii_lowercase())) == Some(ext.clone())
-            })
-            .collect();
-        files.sort();
-        if files.is_empty() {
-            return Err(open_err(format!("{}: no {ext} frames", img_dir.display())));
-        }
+        let info = SeqInfo::read(&ini_path).map_err(|e| open_err(e.to_string()))?;
+        let ext = info.im_ext.to_ascii_lowercase();
         if ext != ".jpg" && ext != ".jpeg" {
-            return Err(open_err(format!("{}: only JPEG frames are supported, imExt is {ext}", ini_path.display())));
+            return Err(open_err(format!(
+                "{}: only JPEG frames are supported, imExt is {}",
+                ini_path.display(),
+                info.im_ext
+            )));
         }
-        let dims = image::image_dimensions(&files[0]).map_err(|e| open_err(format!("{}: {e}", files[0].display())))?;
-        let width = ini_value(&ini, "imWidth").and_then(|v| v.parse().ok()).unwrap_or(dims.0);
-        let height = ini_value(&ini, "imHeight").and_then(|v| v.parse().ok()).unwrap_or(dims.1);
-        Ok(Self { dir: dir.to_path_buf(), files, fps, width, height, realtime, looping, delivered: 0, start: None })
+        let img_dir = dir.join(&info.im_dir);
+        let files: Vec<PathBuf> =
+            (1..=info.seq_length).map(|k| img_dir.join(frame_file_name(k, &info.im_ext))).collect();
+        let Some(first) = files.first() else {
+            return Err(open_err(format!("{}: seqLength is 0, no frames", ini_path.display())));
+        };
+        if !first.is_file() {
+            return Err(open_err(format!("{}: frame 1 is missing", first.display())));
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            files,
+            fps: info.frame_rate,
+            width: info.im_width,
+            height: info.im_height,
+            realtime,
+            looping,
+            delivered: 0,
+            start: None,
+        })
     }
 
     /// Frames in one pass of the sequence.
@@ -148,7 +146,8 @@ mod tests {
     fn unreadable_frame_is_skipped_and_timestamps_stay_monotonic() {
         let dir = tempfile::tempdir().expect("tempdir");
         std::fs::create_dir_all(dir.path().join("img1")).expect("mkdir");
-        std::fs::write(dir.path().join("seqinfo.ini"), "[Sequence]\nframeRate=10\nimExt=.jpg\n").expect("ini");
+        let ini = "[Sequence]\nframeRate=10\nseqLength=3\nimWidth=4\nimHeight=4\nimExt=.jpg\n";
+        std::fs::write(dir.path().join("seqinfo.ini"), ini).expect("ini");
         let img = image::GrayImage::from_pixel(4, 4, image::Luma([9]));
         img.save(dir.path().join("img1/000001.jpg")).expect("save");
         img.save(dir.path().join("img1/000003.jpg")).expect("save");
@@ -172,5 +171,27 @@ mod tests {
             RecordedSource::open(&dir.path().join("nope"), false, false),
             Err(CaptureError::NotFound { .. })
         ));
+    }
+
+    #[test]
+    fn plays_only_the_first_seq_length_frames() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::create_dir_all(dir.path().join("img1")).expect("mkdir");
+        let img = image::GrayImage::from_pixel(4, 4, image::Luma([9]));
+        for k in 1..=5 {
+            img.save(dir.path().join(format!("img1/{k:06}.jpg"))).expect("save");
+        }
+        let ini = "[Sequence]\nframeRate=10\nseqLength=3\nimWidth=4\nimHeight=4\nimExt=.jpg\n";
+        std::fs::write(dir.path().join("seqinfo.ini"), ini).expect("ini");
+        let mut s = RecordedSource::open(dir.path(), false, false).expect("open");
+        assert_eq!(s.len(), 3);
+        for _ in 0..3 {
+            s.next_frame(Vec::new()).expect("frame");
+        }
+        assert!(matches!(s.next_frame(Vec::new()), Err(CaptureError::End)));
+        // A seqinfo.ini without its required keys is refused, naming the file and the key.
+        std::fs::write(dir.path().join("seqinfo.ini"), "[Sequence]\nframeRate=10\n").expect("ini");
+        let e = RecordedSource::open(dir.path(), false, false).expect_err("no seqLength").to_string();
+        assert!(e.contains("seqinfo.ini") && e.contains("seqLength"), "{e}");
     }
 }

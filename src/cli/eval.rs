@@ -14,7 +14,8 @@ use std::path::PathBuf;
 /// `--set`); the convenience flags below are `--set`s and carry no defaults of their own.
 #[derive(Debug, clap::Args)]
 pub struct EvalArgs {
-    /// Sequence folder (MOTChallenge layout plus `gt/world.csv`, `depth/`, `meta.json`).
+    /// Sequence folder: MOTChallenge layout (`seqinfo.ini`, `img1/`, `gt/gt.txt`), and fme's
+    /// `meta.json` (calibration), `gt/world.csv` (speed truth), `depth/` (depth truth) when present.
     #[arg(long)]
     pub sequence: PathBuf,
     /// The configuration.
@@ -188,20 +189,23 @@ fn table(r: &EvalReport) -> String {
         rate(r.rates_hz[0]),
         rate(r.rates_hz[1]),
     ));
-    if r.frames == 0 {
-        lines.push("speed             not scored (the sequence has no gt/world.csv)".to_string());
+    lines.push(format!(
+        "activity          {:.4} m/s  {:.3} BL/s  (mean over {} frames with an estimate; scale from {})",
+        r.mean_activity_mps, r.mean_activity_bls, r.activity_frames, r.scale_source
+    ));
+    if r.frames > 0 {
+        lines.push(format!("frames scored     {} (mean {:.1} fish)", r.frames, r.mean_fish));
+        lines.push(format!(
+            "speed RMSE m/s    {:.4} (truth at t - {:.2} s latency), {:.4} (truth at t)",
+            r.speed_rmse_mps, r.latency_s, r.speed_rmse_now_mps
+        ));
+        lines.push(format!("DistCorr          {:.4}", r.speed_distcorr));
+        lines.push(format!(
+            "error 95% m/s     [{:.4}, {:.4}]  bias {:.4}",
+            r.error_ci95_mps[0], r.error_ci95_mps[1], r.speed_bias_mps
+        ));
+        lines.push(format!("mean speed m/s    true {:.4}  estimated {:.4}", r.mean_true_mps, r.mean_est_mps));
     }
-    lines.push(format!("frames scored     {} (mean {:.1} fish)", r.frames, r.mean_fish));
-    lines.push(format!(
-        "speed RMSE m/s    {:.4} (truth at t - {:.2} s latency), {:.4} (truth at t)",
-        r.speed_rmse_mps, r.latency_s, r.speed_rmse_now_mps
-    ));
-    lines.push(format!("DistCorr          {:.4}", r.speed_distcorr));
-    lines.push(format!(
-        "error 95% m/s     [{:.4}, {:.4}]  bias {:.4}",
-        r.error_ci95_mps[0], r.error_ci95_mps[1], r.speed_bias_mps
-    ));
-    lines.push(format!("mean speed m/s    true {:.4}  estimated {:.4}", r.mean_true_mps, r.mean_est_mps));
     if r.depth_rmse_m.is_some() {
         lines.push(format!(
             "depth at fish     RMSE {} m  d<1.25 {}  d<1.25^2 {}  fit residual {} m, {} failed fits, {} refs visible, {} rejections",
@@ -220,6 +224,12 @@ fn table(r: &EvalReport) -> String {
             opt(r.depth_body_rmse_m, 3),
             opt(r.depth_body_delta_1_25, 3),
             r.depth_body_coverage.map_or("-".to_string(), |c| format!("{:.0}%", 100.0 * c))
+        ));
+    }
+    if let Some(c) = r.depth_consistency {
+        lines.push(format!(
+            "depth consistency {c:+.3}  (Spearman, inverse depth vs box length, mean of {} frames)",
+            r.depth_consistency_frames
         ));
     }
     lines.push(format!("corrections       {} boxes (eq. 3), {} depths (eq. 4)", r.boxes_corrected, r.depths_corrected));
@@ -241,6 +251,9 @@ fn table(r: &EvalReport) -> String {
             m.false_positives,
             m.misses
         ));
+    }
+    for a in &r.absent {
+        lines.push(format!("not scored        {a}"));
     }
     lines.push(String::new());
     lines.join("\n")
@@ -282,7 +295,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     };
     opts.relative.pixel_noise = args.rel_noise;
     opts.relative.low_freq = args.rel_distortion;
-    opts.relative.seed = seq.meta.seed ^ 0x5eed;
+    opts.relative.seed = seq.meta.as_ref().map_or(0, |m| m.seed) ^ 0x5eed;
     let outputs: Vec<&PathBuf> = [&args.tracks, &args.series, &args.plot].into_iter().flatten().collect();
     let created = open_outputs(&outputs)?;
     // Bad inputs (sequence, box file, model, calibration) are usage problems: exit 2.

@@ -11,6 +11,7 @@ use std::io::Write;
 use std::path::Path;
 
 use super::boxes::IndexedBoxes;
+use super::consistency::{DepthConsistency, inside_frame};
 use super::inputs::{BoxInput, DepthInput, GT_WINDOW, GroundTruth, to_metres};
 use super::live::{self, DetectionScore};
 use super::metrics::{DepthAccuracy, bias, distance_correlation, quantile, rmse};
@@ -208,6 +209,22 @@ pub struct EvalReport {
     pub boxes_corrected: u64,
     /// Depth corrections by eq. 4.
     pub depths_corrected: u64,
+    /// Frames with an activity estimate (whether or not there is truth to score it against).
+    pub activity_frames: usize,
+    /// Mean published activity over [`Self::activity_frames`], m/s.
+    pub mean_activity_mps: f64,
+    /// Mean published activity over [`Self::activity_frames`], body lengths per second.
+    pub mean_activity_bls: f64,
+    /// Mean per-frame Spearman correlation between the depth network's relative inverse depth at each
+    /// true box (3x3 median of the map at its centre) and the box's long side, over boxes inside the
+    /// frame: a nearer fish looks longer, so +1 is a depth map that orders the fish as their sizes
+    /// do. With `--depth model` and `gt/gt.txt`, on the frames where the depth network ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_consistency: Option<f64>,
+    /// Frames averaged in [`Self::depth_consistency`] (frames with at least 3 boxes and no full tie).
+    pub depth_consistency_frames: usize,
+    /// Each score this run cannot give, and why (no truth for it, or a stage it replaced).
+    pub absent: Vec<String>,
     /// Tracking quality of the pipeline's tracks against gt/gt.txt (IoU 0.5); its fields appear at
     /// the top level of the JSON (`idf1`, `mota`, `motp`, `id_switches`, ...).
     #[serde(flatten, skip_serializing_if = "Option::is_none")]
@@ -293,11 +310,19 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
             msg: "missing: --depth gt and relative-gt need the ground-truth depth maps (use --depth model)".into(),
         });
     }
+    if !seq.has_gt && (opts.boxes == BoxesChoice::Gt || opts.boxes == BoxesChoice::Tracker) {
+        return Err(EvalError::Input {
+            path: seq.dir.join("gt").join("gt.txt"),
+            msg: "missing: --boxes gt and tracker need the ground-truth boxes (use --boxes model)".into(),
+        });
+    }
     let speed_truth = !seq.world.is_empty();
     let mut cfg = cfg.clone();
     cfg.source.path = seq.dir.clone();
     cfg.source.realtime = false;
     cfg.source.looping = false;
+    // The recording's size (the uncalibrated camera is a 90 degree view of it).
+    (cfg.source.width, cfg.source.height) = (seq.info.im_width, seq.info.im_height);
     let calibration = if opts.no_calibration {
         cfg.camera.calibration = std::path::PathBuf::new();
         if cfg.motion.body_length().is_some() {
@@ -320,13 +345,19 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
     };
     let estimated = opts.depth != DepthChoice::Gt;
     // Reference pixels as the pipeline projects them; the first `foul_refs` read 50% nearer.
-    let refs = ReferencePoints::project(
-        &seq.camera,
-        seq.meta.reference_objects.iter().map(|r| r.front_face_center()),
-        seq.meta.width,
-        seq.meta.height,
-    );
-    let fouled: Vec<Pixel> = refs.iter().take(opts.foul_refs).map(|(px, _)| px).collect();
+    let fouled: Vec<Pixel> = match &seq.camera {
+        Some(camera) => ReferencePoints::project(
+            camera,
+            seq.reference_objects().iter().map(|r| r.front_face_center()),
+            seq.info.im_width,
+            seq.info.im_height,
+        )
+        .iter()
+        .take(opts.foul_refs)
+        .map(|(px, _)| px)
+        .collect(),
+        None => Vec::new(),
+    };
     let substitute = GroundTruth::new(seq.clone(), box_input(seq, opts)?, depth_input, fouled);
     let mut pipeline =
         FishPipeline::with_substitute(&cfg, calibration, Box::new(substitute)).map_err(EvalError::Model)?;
@@ -355,13 +386,18 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
     }
     let (mut hide, mut misplace) = (opts.hide_refs, opts.move_refs);
     // Camera z of each fish's body centre by (frame, id): ground-truth boxes carry world.csv's ids.
-    let body_z: HashMap<(u32, u32), f64> = if estimated && opts.boxes == BoxesChoice::Gt {
-        seq.world.iter().map(|r| ((r.frame, r.id), seq.camera.pose.to_camera(&r.position).depth().0)).collect()
-    } else {
-        HashMap::new()
+    let body_z: HashMap<(u32, u32), f64> = match &seq.camera {
+        Some(camera) if estimated && opts.boxes == BoxesChoice::Gt => {
+            seq.world.iter().map(|r| ((r.frame, r.id), camera.pose.to_camera(&r.position).depth().0)).collect()
+        }
+        _ => HashMap::new(),
     };
     let gt_boxes = live::gt_by_frame(seq);
-    let score_tracks = opts.boxes != BoxesChoice::Gt && !matches!(opts.boxes, BoxesChoice::File(_));
+    let score_tracks = seq.has_gt && opts.boxes != BoxesChoice::Gt && !matches!(opts.boxes, BoxesChoice::File(_));
+    let score_detection = seq.has_gt && opts.boxes == BoxesChoice::Model;
+    let score_consistency = seq.has_gt && opts.depth == DepthChoice::Model;
+    let (frame_w, frame_h) = (f64::from(seq.info.im_width), f64::from(seq.info.im_height));
+    let mut consistency = DepthConsistency::default();
     let mut mot = MotAccumulator::new();
     let mut detection = DetectionScore::default();
     let mut depth_acc = DepthAccuracy::default();
@@ -413,7 +449,18 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
             h.extend(pipeline.observations().iter().map(|o| (i64::from(o.id), o.bbox)));
             mot.update(&g, &h);
         }
-        if opts.boxes == BoxesChoice::Model && pipeline.ran().detect {
+        if score_consistency
+            && pipeline.ran().depth
+            && let Some(map) = pipeline.depth_map()
+        {
+            // Relative inverse depth at each true box's centre, 3x3 median of the map.
+            consistency.add_frame(
+                fg.iter()
+                    .filter(|(_, b, _)| inside_frame(b, frame_w, frame_h))
+                    .filter_map(|&(_, b, _)| map.sample_with_radius(b.center(), 1).map(|r| (f64::from(r), b))),
+            );
+        }
+        if score_detection && pipeline.ran().detect {
             frame_gt.clear();
             frame_gt.extend(fg.iter().map(|&(_, b, v)| (b, v)));
             detection.add_frame(pipeline.detections(), &frame_gt);
@@ -474,7 +521,7 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
     // Truth at the time each estimate refers to (`SwarmEstimate::latency`), interpolated between frames.
     let truth_frame: Vec<Option<f64>> = true_sum.iter().map(|&(ts, tn)| (tn > 0).then(|| ts / tn as f64)).collect();
     let bls_frame: Vec<Option<f64>> = true_bls.iter().map(|&(ts, tn)| (tn > 0).then(|| ts / tn as f64)).collect();
-    let fps = seq.meta.fps;
+    let fps = seq.info.frame_rate;
     let interpolate = |truth_frame: &[Option<f64>], tq: f64| -> Option<f64> {
         let pos = tq * fps + 1.0;
         let f0 = pos.floor();
@@ -525,6 +572,13 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         series.iter().filter(|r| r.est_mps().is_some()).map(|r| &r.row.sample).collect();
     let fits = pipeline.fit_stats();
     let mot_summary = score_tracks.then(|| MotSummary::from(&mot.metrics()));
+    let activity: Vec<&ActivitySample> =
+        series.iter().map(|r| &r.row.sample).filter(|s| s.mean.0.is_finite()).collect();
+    let mean_of = |f: fn(&ActivitySample) -> f64| -> f64 {
+        let v: Vec<f64> = activity.iter().map(|s| f(s)).filter(|x| x.is_finite()).collect();
+        if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 }
+    };
+    let absent = absent_scores(seq, opts, speed_truth);
     let mut report = EvalReport {
         sequence: seq.dir.display().to_string(),
         boxes: boxes_name,
@@ -563,7 +617,13 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         boxes_corrected,
         depths_corrected,
         mot: mot_summary,
-        detection: (opts.boxes == BoxesChoice::Model).then_some(detection),
+        detection: score_detection.then_some(detection),
+        activity_frames: activity.len(),
+        mean_activity_mps: mean_of(|s| s.mean.0),
+        mean_activity_bls: mean_of(|s| s.mean_body_lengths),
+        depth_consistency: consistency.mean(),
+        depth_consistency_frames: consistency.frames(),
+        absent,
         series,
         tracks,
     };
@@ -574,6 +634,33 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         report.speed_bias_mps = f64::NAN;
     }
     Ok(report)
+}
+
+/// The scores a run cannot give, each with its reason (`absent` in the report).
+fn absent_scores(seq: &Sequence, opts: &EvalOptions, speed_truth: bool) -> Vec<String> {
+    let mut absent = Vec::new();
+    if !speed_truth {
+        absent
+            .push("speed and BL/s errors: no gt/world.csv (no speed truth); the activity is reported unscored".into());
+    }
+    if opts.depth != DepthChoice::Gt && !seq.has_depth {
+        absent.push("depth accuracy: no depth/ (no depth truth)".into());
+    }
+    if !seq.has_gt {
+        absent.push("detection, tracking and depth consistency: no gt/gt.txt (no true boxes)".into());
+        return absent;
+    }
+    match &opts.boxes {
+        BoxesChoice::Model => {}
+        BoxesChoice::Tracker => absent.push("detection: --boxes tracker (the detector does not run)".into()),
+        BoxesChoice::Gt | BoxesChoice::File(_) => {
+            absent.push("detection and tracking: the boxes are given (the detector and tracker do not run)".into())
+        }
+    }
+    if opts.depth != DepthChoice::Model {
+        absent.push("depth consistency: the depth network does not run (--depth model runs it)".into());
+    }
+    absent
 }
 
 /// Writes a CSV file: `header`, then one line per item from `line` (empty field where a value is

@@ -126,13 +126,11 @@ impl Substitute for GroundTruth {
     fn load_depth(&mut self, frame: &Frame) -> Result<(), String> {
         let n = Self::frame_of(frame);
         let map = self.seq.read_depth(n).map_err(|e| e.to_string())?;
-        if (map.width, map.height) != (self.seq.meta.width, self.seq.meta.height) {
+        let (w, h) = (self.seq.info.im_width, self.seq.info.im_height);
+        if (map.width, map.height) != (w, h) {
             return Err(EvalError::Input {
                 path: self.seq.depth_path(n),
-                msg: format!(
-                    "depth map is {}x{}, the sequence is {}x{}",
-                    map.width, map.height, self.seq.meta.width, self.seq.meta.height
-                ),
+                msg: format!("depth map is {}x{}, the sequence is {w}x{h}", map.width, map.height),
             }
             .to_string());
         }

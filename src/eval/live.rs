@@ -61,7 +61,7 @@ impl DetectionScore {
 /// image (gt.txt boxes are amodal and may reach outside it; a detector can only see the inside).
 /// Fish entirely outside the image are left out.
 pub fn gt_by_frame(seq: &Sequence) -> Vec<Vec<(u32, PixelBox, f64)>> {
-    let (w, h) = (f64::from(seq.meta.width), f64::from(seq.meta.height));
+    let (w, h) = (f64::from(seq.info.im_width), f64::from(seq.info.im_height));
     let mut out = vec![Vec::new(); seq.len() as usize];
     for g in &seq.gt {
         let b = g.bbox;
@@ -82,10 +82,10 @@ pub fn gt_by_frame(seq: &Sequence) -> Vec<Vec<(u32, PixelBox, f64)>> {
 pub fn synthetic_detections(seq: &Sequence, seed: u64) -> Vec<Vec<Detection>> {
     let ts = TuneSequence {
         name: seq.dir.display().to_string(),
-        fps: seq.meta.fps,
+        fps: seq.info.frame_rate,
         frames: seq.len(),
-        width: f64::from(seq.meta.width),
-        height: f64::from(seq.meta.height),
+        width: f64::from(seq.info.im_width),
+        height: f64::from(seq.info.im_height),
         gt: seq
             .gt
             .iter()

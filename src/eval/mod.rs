@@ -1,11 +1,12 @@
 //! Evaluation against ground truth (paper section 4.5): speed RMSE, Szekely's distance correlation,
-//! the error interval, depth accuracy at fish centres, plots and per-frame series, and the driver
-//! behind `fme eval`.
+//! the error interval, depth accuracy at fish centres, depth consistency where there is no depth
+//! truth, plots and per-frame series, and the driver behind `fme eval`.
 //!
 //! The driver runs the daemon's own [`crate::pipeline::FishPipeline`] with the one config, ground
 //! truth swapped in where asked ([`inputs`]), so what is scored is what the PLC receives.
 
 mod boxes;
+pub mod consistency;
 mod driver;
 pub mod inputs;
 pub mod live;

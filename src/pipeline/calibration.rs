@@ -3,18 +3,9 @@
 
 use crate::config::Config;
 use crate::geometry::{Camera, Pose, WorldPoint};
-use crate::sequence::{CameraMeta, ReferenceObject};
+use crate::sequence::{Meta, ReferenceObject};
 use crate::units::Metres;
 use std::path::{Path, PathBuf};
-
-/// The calibration file: the `camera` block and `reference_objects` of a sequence's `meta.json`;
-/// other keys (fps, water, ...) are allowed and ignored, so a recording's own file works as is.
-#[derive(Debug, Clone, serde::Deserialize)]
-struct CalibrationFile {
-    camera: CameraMeta,
-    #[serde(default)]
-    reference_objects: Vec<ReferenceObject>,
-}
 
 /// A loaded calibration.
 #[derive(Debug, Clone, PartialEq)]
@@ -61,7 +52,9 @@ impl Calibration {
     /// Reads and checks a calibration file; the error names the file and the problem.
     pub fn load(path: &Path) -> Result<Self, String> {
         let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let f: CalibrationFile = serde_json::from_str(&text)
+        // The `meta.json` format, read by the sequence reader's parser: the `camera` block and
+        // `reference_objects` are used; other keys (fps, water, ...) are allowed and ignored.
+        let f: Meta = serde_json::from_str(&text)
             .map_err(|e| format!("{}: not a calibration (meta.json) file: {e}", path.display()))?;
         let intrinsics = f.camera.intrinsics();
         intrinsics.validate().map_err(|e| format!("{}: camera: {e}", path.display()))?;

@@ -207,6 +207,12 @@ impl FishPipeline {
         &self.obs
     }
 
+    /// The depth network's last relative inverse-depth map (none when the network does not run:
+    /// ground-truth depth, or before its first frame).
+    pub fn depth_map(&self) -> Option<&infer::RelDepthMap> {
+        self.depth.as_ref().and_then(DepthNet::last_map)
+    }
+
     /// The estimator's result on the last frame (corrections, latency, ...).
     pub fn estimate(&self) -> &SwarmEstimate {
         &self.estimate

@@ -105,14 +105,15 @@ pub fn freeze(
     std::fs::write(&p, &inputs.config_text).map_err(|e| io(&p, e))?;
     if let Some(calib) = &inputs.calibration {
         let p = staged.join("meta.json");
-        // A full meta.json gets this recording's size and length (so `fme eval` opens it); any other
-        // calibration file is kept as it was loaded.
+        // A sequence's meta.json (it states a frame rate) gets this recording's rate, size and length
+        // (so `fme eval` opens it); any other calibration file (`fme calibrate`'s) is kept as it was
+        // loaded: the sequence reader takes what it leaves out from seqinfo.ini.
         match Meta::read(calib) {
-            Ok(mut m) => {
+            Ok(mut m) if m.fps > 0.0 => {
                 (m.fps, m.width, m.height, m.frames) = (fps, first.size.0, first.size.1, entries.len() as u32);
                 m.write(&p).map_err(|e| e.to_string())?;
             }
-            Err(_) => {
+            _ => {
                 std::fs::copy(calib, &p).map_err(|e| io(&p, e))?;
             }
         }

@@ -7,16 +7,24 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// The contents of `meta.json` (issue 2). Unknown keys are ignored on reading, so later generator
-/// versions may add fields without breaking older readers.
+/// versions may add fields without breaking older readers. Only `camera` is required: a real
+/// recording's file is a calibration (`fme calibrate` writes `camera`, `reference_objects`, `width`,
+/// `height`), without the synthetic scene's fields; `seqinfo.ini` is the authority for the frame
+/// rate, size and length, and [`super::Sequence::open`] fills in what the file leaves out.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Meta {
     /// Frames per second of the recording; frame `k` (1-based) is at `(k - 1) / fps` seconds.
+    /// 0 when the file does not state it.
+    #[serde(default)]
     pub fps: f64,
-    /// Image width, pixels.
+    /// Image width, pixels (0 when not stated).
+    #[serde(default)]
     pub width: u32,
-    /// Image height, pixels.
+    /// Image height, pixels (0 when not stated).
+    #[serde(default)]
     pub height: u32,
-    /// Number of frames.
+    /// Number of frames (0 when not stated).
+    #[serde(default)]
     pub frames: u32,
     /// Seed of the generator's random number generator.
     #[serde(default)]
@@ -24,11 +32,13 @@ pub struct Meta {
     /// Motion preset (`single`, `swarm`, `postproc-suite/<scene>`, `feeding`), or a free label.
     #[serde(default)]
     pub preset: String,
-    /// Program that wrote the sequence.
+    /// Program that wrote the sequence (empty when not stated).
+    #[serde(default)]
     pub generator: GeneratorMeta,
     /// Pinhole camera and its fixed world-to-camera pose.
     pub camera: CameraMeta,
-    /// Water type and optical coefficients.
+    /// Water type and optical coefficients (type `unknown` when not stated).
+    #[serde(default)]
     pub water: WaterMeta,
     /// Reference cubes of known position (paper sec. 4.3.2, Fig. 7).
     #[serde(default)]
@@ -45,7 +55,7 @@ pub struct Meta {
 }
 
 /// Name and version of the program that wrote a sequence.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct GeneratorMeta {
     /// Program name, e.g. `fme synth`.
     pub name: String,
@@ -93,6 +103,13 @@ pub struct WaterMeta {
     /// Veiling light (backscatter at infinity) `B_c` in `[0, 1]`, (R, G, B).
     #[serde(default)]
     pub backscatter: [f64; 3],
+}
+
+impl Default for WaterMeta {
+    /// Water of a recording that does not describe it.
+    fn default() -> Self {
+        Self { kind: "unknown".into(), attenuation_per_m: [0.0; 3], backscatter: [0.0; 3] }
+    }
 }
 
 /// A reference cube of known size and position.
@@ -162,13 +179,11 @@ impl Meta {
         std::fs::write(path, text).map_err(|e| Error::io(path, e))
     }
 
-    /// Checks the values can describe a sequence; `path` is only used in the error.
+    /// Checks the values can describe a sequence; `path` is only used in the error. A value left
+    /// out (0) is not checked: `seqinfo.ini` gives it.
     pub fn validate(&self, path: &Path) -> Result<()> {
-        if !self.fps.is_finite() || self.fps <= 0.0 {
+        if !self.fps.is_finite() || self.fps < 0.0 {
             return Err(Error::invalid(path, format!("fps must be positive, got {}", self.fps)));
-        }
-        if self.width == 0 || self.height == 0 {
-            return Err(Error::invalid(path, "width and height must be positive"));
         }
         self.camera(path)?;
         Ok(())
@@ -187,5 +202,34 @@ impl Meta {
     /// Timestamp of 1-based frame `frame`: `(frame - 1) / fps`.
     pub fn timestamp(&self, frame: u32) -> Seconds {
         Seconds(f64::from(frame.saturating_sub(1)) / self.fps)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What `fme calibrate` writes: no fps, frames, generator or water.
+    const CALIBRATION: &str = r#"{"width": 640, "height": 384,
+        "camera": {"fx": 300, "fy": 300, "cx": 320, "cy": 192,
+                   "world_to_camera": {"rotation": [[1,0,0],[0,1,0],[0,0,1]], "translation": [0,0,0]}},
+        "reference_objects": [{"id": 1, "size_m": 0, "center_w": [0,0,2], "front_face_center_w": [0,0,2]}],
+        "calibrate": {"rms_px": 0.4}}"#;
+
+    #[test]
+    fn a_calibration_without_the_synthetic_fields_reads() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("meta.json");
+        std::fs::write(&p, CALIBRATION).expect("write");
+        let m = Meta::read(&p).expect("a calibration is a meta.json");
+        assert_eq!((m.fps, m.frames, m.width), (0.0, 0, 640));
+        assert_eq!((m.water.kind.as_str(), m.generator.name.as_str()), ("unknown", ""));
+        assert_eq!(m.reference_objects.len(), 1);
+        // The camera stays required, and the error names the file and the key.
+        std::fs::write(&p, r#"{"fps": 30}"#).expect("write");
+        let e = Meta::read(&p).expect_err("no camera").to_string();
+        assert!(e.contains("meta.json") && e.contains("camera"), "{e}");
+        std::fs::write(&p, CALIBRATION.replace("\"width\": 640", "\"fps\": -1")).expect("write");
+        assert!(Meta::read(&p).expect_err("negative fps").to_string().contains("fps"));
     }
 }
