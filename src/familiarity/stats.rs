@@ -11,7 +11,7 @@ pub const NEST_COVER: f64 = 0.9;
 /// Whether `inner` lies at least [`NEST_COVER`] inside `outer`, and `outer` is the larger box.
 pub fn nested_in(inner: &PixelBox, outer: &PixelBox) -> bool {
     let a = inner.area();
-    if !(a > 0.0) || outer.area() <= a {
+    if a.is_nan() || a <= 0.0 || outer.area() <= a {
         return false;
     }
     let iw = (inner.right().min(outer.right()) - inner.x.max(outer.x)).max(0.0);
