@@ -21,6 +21,7 @@ fn row(i: i64) -> Row {
         fault: 0,
         feeding: v > 0.25,
         scale: fme::pipeline::ScaleSource::Fish,
+        unlike_fish: false,
     }
 }
 

@@ -112,6 +112,7 @@ fn main() {
                         fault: 0,
                         feeding: false,
                         scale: fme::pipeline::ScaleSource::References,
+                        unlike_fish: false,
                     };
                     json.clear();
                     fme::output::mqtt::activity_json(&id, seq, &row, &mut json);

@@ -15,6 +15,7 @@
 //! | [`metric`] | relative inverse depth to metres from reference objects | eq. 1-2 |
 //! | [`postprocess`] | box-fluctuation and depth-jump detectors with EWMA | eq. 3-4 |
 //! | [`motion`] | world positions, per-fish 3D speed, swarm mean (activity index) | sec. 3.3, eq. 5 |
+//! | [`familiarity`] | "detections look unlike fish": the detector out of its training range | - |
 //! | [`pipeline`] | the stages chained on frame time; what every command runs | eq. 1-5 |
 //! | [`eval`], [`mot`] | speed, depth and tracking metrics against ground truth | sec. 4.5 |
 //! | [`config`], [`status`] | the one configuration; health and fault codes shared by the edges | - |
@@ -37,6 +38,7 @@ pub mod config;
 pub mod console;
 pub mod detection;
 pub mod eval;
+pub mod familiarity;
 pub mod geometry;
 pub mod history;
 pub mod infer;

@@ -346,7 +346,7 @@ fn cli_json_series_and_plot() {
     }
     let csv = std::fs::read_to_string(&series).unwrap();
     assert!(csv.starts_with(
-        "frame,t,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,latency_s,too_few_fish,uncalibrated,scale,true_mps,true_now_mps\n"
+        "frame,t,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,latency_s,too_few_fish,uncalibrated,scale,unlike_fish,true_mps,true_now_mps\n"
     ));
     assert_eq!(csv.lines().count(), N as usize + 1);
     let png = image::open(&plot).unwrap();

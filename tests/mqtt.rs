@@ -181,7 +181,7 @@ async fn wait_for(limit: Duration, mut cond: impl FnMut() -> bool) -> bool {
 }
 
 /// The status bits by name, in bit order, as documented in docs/mqtt.md.
-const STATUS_NAMES: [&str; 10] = [
+const STATUS_NAMES: [&str; 11] = [
     "running",
     "camera_ok",
     "detector_ok",
@@ -192,8 +192,10 @@ const STATUS_NAMES: [&str; 10] = [
     "record_fault",
     "scale_from_fish",
     "telemetry_fault",
+    "unlike_fish",
 ];
-const FAULTS: [&str; 7] = ["none", "camera", "detector", "depth", "pipeline_stalled", "plc_link", "stopped"];
+const FAULTS: [&str; 8] =
+    ["none", "camera", "detector", "depth", "pipeline_stalled", "plc_link", "stopped", "unlike_fish"];
 
 fn keys(v: &Value) -> Vec<&str> {
     let mut k: Vec<&str> = v.as_object().map(|o| o.keys().map(String::as_str).collect()).unwrap_or_default();

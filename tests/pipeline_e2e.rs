@@ -211,7 +211,7 @@ fn run_and_eval_give_the_same_series_on_every_frame() {
     let run = std::fs::read_to_string(&run_csv).expect("run series");
     let eval = std::fs::read_to_string(&eval_csv).expect("eval series");
     let columns = run.lines().next().expect("header").split(',').count();
-    assert_eq!(columns, 11, "{run}");
+    assert_eq!(columns, 12, "{run}");
     let head = |l: &str| l.split(',').take(columns).collect::<Vec<_>>().join(",");
     let (r, e): (Vec<String>, Vec<String>) = (run.lines().map(head).collect(), eval.lines().map(head).collect());
     assert_eq!(r.len(), 121, "a header and one row per frame");

@@ -36,7 +36,7 @@ pub struct RunArgs {
     #[arg(long)]
     pub max_frames: Option<u64>,
     /// Write the per-frame series the pipeline computed as CSV
-    /// (`frame,t,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,latency_s,too_few_fish,uncalibrated`).
+    /// (`frame,t,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,latency_s,too_few_fish,uncalibrated,scale,unlike_fish`).
     #[arg(long, value_name = "FILE.csv")]
     pub series: Option<PathBuf>,
 }

@@ -178,6 +178,7 @@ impl Config {
         })?;
         self.postprocess.validate().map_err(keyed)?;
         self.motion.validate().map_err(keyed)?;
+        self.familiarity.validate().map_err(|m| keyed(&m))?;
         if self.depth.scale == crate::metric::DepthScale::Fish && self.motion.body_length().is_none() {
             return err("depth.scale", "\"fish\" needs the cohort's mean length: motion.body_length_m > 0");
         }

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 pub use super::stages::CameraConfig;
+pub use crate::familiarity::FamiliarityConfig;
 pub use crate::infer::{DepthConfig, DetectorConfig};
 pub use crate::motion::MotionConfig;
 pub use crate::postprocess::PostprocessConfig;
@@ -31,6 +32,8 @@ pub struct Config {
     pub postprocess: PostprocessConfig,
     /// `[motion]`: speeds and the activity index (paper eq. 5).
     pub motion: MotionConfig,
+    /// `[familiarity]`: "detections look unlike fish" (status bit 10; the feeding rule holds off).
+    pub familiarity: FamiliarityConfig,
     /// `[output]`: Modbus and serial line.
     pub output: OutputConfig,
     /// `[console]`: serial field-diagnostics console.

@@ -106,6 +106,7 @@ fn status_words(bits: u16) -> String {
         (status::RECORD_FAULT, "record-fault"),
         (status::SCALE_FROM_FISH, "scale-from-fish"),
         (status::TELEMETRY_FAULT, "telemetry-fault"),
+        (status::UNLIKE_FISH, "unlike-fish"),
     ];
     let v: Vec<&str> = names.iter().filter(|(b, _)| bits & b != 0).map(|(_, n)| *n).collect();
     if v.is_empty() { "-".into() } else { v.join(" ") }
@@ -120,6 +121,7 @@ fn fault_name(code: u16) -> &'static str {
         4 => "pipeline stalled",
         5 => "plc link down",
         6 => "stopped",
+        7 => "detections look unlike fish",
         _ => "unknown",
     }
 }
@@ -292,7 +294,7 @@ last {}",
                 let h = shared.health();
                 let _ = write!(
                     body,
-                    "state {}\nstatus 0x{:04x} {}\nfault {} ({})\nsource {}\nuptime {} s\nfeeding-recommended {}\nhistory {}\nmetrics {}",
+                    "state {}\nstatus 0x{:04x} {}\nfault {} ({})\nsource {}\nuptime {} s\nfeeding-recommended {}\ndetections {}\nhistory {}\nmetrics {}",
                     if shared.stopping() { "stopping" } else { "running" },
                     r[10],
                     status_words(r[10]),
@@ -301,6 +303,7 @@ last {}",
                     h.source,
                     h.started.elapsed().as_secs(),
                     r[17],
+                    h.stage.familiarity.describe(),
                     shared.history.describe(),
                     shared.metrics.describe()
                 );
@@ -718,6 +721,7 @@ record
                 fault: 0,
                 feeding: true,
                 scale: crate::pipeline::ScaleSource::References,
+                unlike_fish: false,
             };
             w.write(&r).expect("write");
         }

@@ -180,6 +180,11 @@ pub struct EvalReport {
     /// Depth RMSE at fish (estimated depth only, ground truth read the same way), metres.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_rmse_m: Option<f64>,
+    /// Share of the output updates (at `output.rate_hz` on frame time) with the "detections look
+    /// unlike fish" flag raised (`[familiarity]`, status bit 10).
+    pub unlike_fish_share: f64,
+    /// The least and greatest value of each familiarity statistic over the judged windows.
+    pub familiarity: crate::familiarity::StatRanges,
     /// Fraction of fish with max(est/true, true/est) < 1.25.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_delta_1_25: Option<f64>,
@@ -409,6 +414,9 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
     let (mut g, mut h, mut frame_gt) = (Vec::new(), Vec::new(), Vec::new());
     let mut cpu_s = 0.0;
     let mut buf = Vec::new();
+    // Output updates on frame time, and how many had the familiarity flag raised.
+    let (mut next_update, mut updates, mut flagged) = (f64::NEG_INFINITY, 0u64, 0u64);
+    let mut familiarity = crate::familiarity::StatRanges::default();
     loop {
         let frame_data = match source.next_frame(std::mem::take(&mut buf)) {
             Ok(f) => f,
@@ -438,6 +446,19 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         buf = frame_data.data;
         let Some(sample) = sample else { continue };
         let t = sample.timestamp;
+        if pipeline.ran().detect
+            && let Some(w) = pipeline.health().familiarity.stats
+        {
+            familiarity.add(&w);
+        }
+        if t.0 >= next_update {
+            updates += 1;
+            flagged += u64::from(sample.flags.unlike_fish);
+            next_update = if next_update.is_finite() { next_update } else { t.0 } + 1.0 / cfg.output.rate_hz;
+            if next_update <= t.0 {
+                next_update = t.0 + 1.0 / cfg.output.rate_hz;
+            }
+        }
         let est = *pipeline.estimate();
         boxes_corrected += u64::from(est.boxes_corrected);
         depths_corrected += u64::from(est.depths_corrected);
@@ -604,6 +625,8 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         // Over the frames with an estimate (a frame without one has no latency).
         latency_s: with_est.iter().map(|s| s.latency.0).sum::<f64>() / with_est.len().max(1) as f64,
         cpu_ms_per_frame: 1000.0 * cpu_s / series.len().max(1) as f64,
+        unlike_fish_share: flagged as f64 / updates.max(1) as f64,
+        familiarity,
         depth_rmse_m: depth_acc.rmse(),
         depth_delta_1_25: depth_acc.delta_1_25(),
         depth_delta_1_25_2: depth_acc.delta_1_25_2(),

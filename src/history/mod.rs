@@ -31,7 +31,13 @@ use std::time::{Duration, Instant};
 use tracing::Level;
 
 /// First line of every day file.
-pub const HEADER: &str = "time_utc,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,status,fault,feeding,scale";
+pub const HEADER: &str =
+    "time_utc,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,status,fault,feeding,scale,unlike_fish";
+/// First line of day files written before the `unlike_fish` column: still read, and rows without
+/// the column read as `unlike_fish` 0 (a day file begun before an upgrade is continued with the new
+/// rows).
+pub const HEADER_WITHOUT_UNLIKE_FISH: &str =
+    "time_utc,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,status,fault,feeding,scale";
 /// First line of day files written before the `scale` column: still read, and rows without the
 /// column read as scale `none` (a day file begun before an upgrade is continued with the new rows).
 pub const HEADER_WITHOUT_SCALE: &str = "time_utc,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,status,fault,feeding";
@@ -64,6 +70,8 @@ pub struct Row {
     pub feeding: bool,
     /// What set the metric scale (`depth.scale`; status bit 8).
     pub scale: ScaleSource,
+    /// The detections looked unlike fish (status bit 10, `[familiarity]`).
+    pub unlike_fish: bool,
 }
 
 use crate::civil::{civil_from_days, days_from_civil};
@@ -148,14 +156,22 @@ pub fn format_row(r: &Row, out: &mut String) {
     push_num(out, r.ci95_mps, 4);
     let _ = write!(out, ",{},", r.n_fish);
     push_num(out, r.bls, 3);
-    let _ = writeln!(out, ",{},{},{},{}", r.status, r.fault, u8::from(r.feeding), r.scale.name());
+    let _ = writeln!(
+        out,
+        ",{},{},{},{},{}",
+        r.status,
+        r.fault,
+        u8::from(r.feeding),
+        r.scale.name(),
+        u8::from(r.unlike_fish)
+    );
 }
 
 /// Parses one line (without its `\n`) written by [`format_row`].
 pub fn parse_row(line: &str) -> Result<Row, String> {
     let f: Vec<&str> = line.split(',').collect();
-    if f.len() != 10 && f.len() != 9 {
-        return Err(format!("expected 10 fields ({HEADER}), got {}", f.len()));
+    if !(9..=11).contains(&f.len()) {
+        return Err(format!("expected 11 fields ({HEADER}), got {}", f.len()));
     }
     let num = |i: usize, name: &str| -> Result<f64, String> {
         if f[i].is_empty() {
@@ -186,6 +202,11 @@ pub fn parse_row(line: &str) -> Result<Row, String> {
         scale: match f.get(9) {
             None => ScaleSource::None,
             Some(v) => ScaleSource::parse(v).ok_or_else(|| format!("scale: references, fish or none, got {v:?}"))?,
+        },
+        unlike_fish: match f.get(10) {
+            None | Some(&"0") => false,
+            Some(&"1") => true,
+            Some(o) => return Err(format!("unlike_fish: must be 0 or 1, got {o:?}")),
         },
     })
 }
@@ -231,7 +252,7 @@ pub fn read_day_file(path: &Path) -> Result<DayFile, HistoryError> {
     let bad = |line: usize, message: String| HistoryError::Line { path: path.to_path_buf(), line, message };
     for (i, raw) in bytes[..complete].split(|&b| b == b'\n').enumerate() {
         if i == 0 && complete > 0 {
-            if raw != HEADER.as_bytes() && raw != HEADER_WITHOUT_SCALE.as_bytes() {
+            if ![HEADER, HEADER_WITHOUT_UNLIKE_FISH, HEADER_WITHOUT_SCALE].iter().any(|h| raw == h.as_bytes()) {
                 return Err(bad(1, format!("not a history file: the first line must be `{HEADER}`")));
             }
             continue;
@@ -646,6 +667,7 @@ mod tests {
             fault: 0,
             feeding: v > 0.2,
             scale: ScaleSource::References,
+            unlike_fish: false,
         }
     }
 
@@ -688,6 +710,31 @@ mod tests {
         assert!(e.starts_with("scale:"), "{e}");
         let old = parse_row("2126-12-04T16:14:34.123Z,0.1,,,1,,0,0,0").expect("a row without the scale column");
         assert_eq!(old.scale, ScaleSource::None);
+        // The unlike_fish column: round trip, a bad value, and rows written before it (10 fields).
+        for unlike_fish in [true, false] {
+            line.clear();
+            format_row(&Row { unlike_fish, ..r }, &mut line);
+            assert!(line.trim_end().ends_with(if unlike_fish { ",1" } else { ",0" }), "{line}");
+            assert_eq!(parse_row(line.trim_end()).expect("parses").unlike_fish, unlike_fish, "{line}");
+        }
+        let e = parse_row("2126-12-04T16:14:34.123Z,0.1,,,1,,0,0,0,fish,yes").unwrap_err();
+        assert!(e.starts_with("unlike_fish:"), "{e}");
+        let old = parse_row("2126-12-04T16:14:34.123Z,0.1,,,1,,0,0,0,fish").expect("a row without unlike_fish");
+        assert!(!old.unlike_fish);
+        assert_eq!(old.scale, ScaleSource::Fish);
+    }
+
+    #[test]
+    fn day_files_from_before_the_unlike_fish_column_are_read() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("2126-11-03.csv");
+        let rows = "2126-11-03T00:00:01.000Z,0.1,0.1,0.01,3,0.3,15,0,0,fish\n\
+                    2126-11-03T00:00:02.000Z,0.1,0.1,0.01,3,0.3,1039,7,0,fish,1\n";
+        std::fs::write(&p, format!("{HEADER_WITHOUT_UNLIKE_FISH}\n{rows}")).expect("write");
+        let f = read_day_file(&p).expect("reads");
+        assert_eq!(f.rows.len(), 2);
+        assert!(!f.rows[0].unlike_fish, "an old row");
+        assert!(f.rows[1].unlike_fish, "a new row continuing the old file");
     }
 
     #[test]

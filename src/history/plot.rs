@@ -199,6 +199,7 @@ mod tests {
             fault,
             feeding,
             scale: crate::pipeline::ScaleSource::Fish,
+            unlike_fish: false,
         }
     }
 

@@ -63,6 +63,7 @@ pub const STATUS_BITS: &[(u16, &str)] = &[
     (status::RECORD_FAULT, "record-fault"),
     (status::SCALE_FROM_FISH, "scale-from-fish"),
     (status::TELEMETRY_FAULT, "telemetry-fault"),
+    (status::UNLIKE_FISH, "unlike-fish"),
 ];
 
 // ---------------------------------------------------------------------------------------------

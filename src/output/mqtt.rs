@@ -34,7 +34,7 @@ use tracing::Level;
 
 /// Names of the status bits of input register 10 as they appear in the `activity` JSON
 /// (`status` object), in bit order.
-pub const STATUS_BIT_NAMES: [(&str, u16); 10] = [
+pub const STATUS_BIT_NAMES: [(&str, u16); 11] = [
     ("running", status::RUNNING),
     ("camera_ok", status::CAMERA_OK),
     ("detector_ok", status::DETECTOR_OK),
@@ -45,6 +45,7 @@ pub const STATUS_BIT_NAMES: [(&str, u16); 10] = [
     ("record_fault", status::RECORD_FAULT),
     ("scale_from_fish", status::SCALE_FROM_FISH),
     ("telemetry_fault", status::TELEMETRY_FAULT),
+    ("unlike_fish", status::UNLIKE_FISH),
 ];
 
 /// Payload of the retained `status` topic while connected.
@@ -69,6 +70,7 @@ pub fn fault_name(code: u16) -> &'static str {
         4 => "pipeline_stalled",
         5 => "plc_link",
         6 => "stopped",
+        7 => "unlike_fish",
         _ => "unknown",
     }
 }
@@ -136,6 +138,8 @@ pub enum EventKind {
     FaultRaised(u16),
     /// A fault code went away.
     FaultCleared(u16),
+    /// "Detections look unlike fish" (status bit 10) was raised (`true`) or cleared (`false`).
+    UnlikeFish(bool),
     /// The source of the metric scale changed (`depth.scale`: fish <-> references).
     ScaleSource {
         /// Before.
@@ -153,6 +157,8 @@ impl EventKind {
             Self::FeedingOff => "feeding_off",
             Self::FaultRaised(_) => "fault_raised",
             Self::FaultCleared(_) => "fault_cleared",
+            Self::UnlikeFish(true) => "unlike_fish_raised",
+            Self::UnlikeFish(false) => "unlike_fish_cleared",
             Self::ScaleSource { .. } => "scale_source",
         }
     }
@@ -164,11 +170,12 @@ impl EventKind {
 #[derive(Debug, Clone, Default)]
 pub struct EventTracker {
     last: Option<(bool, u16, ScaleSource)>,
+    unlike_fish: bool,
 }
 
 impl EventTracker {
     /// The events of `row` (with the scale source in use) against the previous update.
-    pub fn update(&mut self, row: &Row, scale: ScaleSource) -> heapless::Vec<EventKind, 4> {
+    pub fn update(&mut self, row: &Row, scale: ScaleSource) -> heapless::Vec<EventKind, 6> {
         let mut out = heapless::Vec::new();
         if row.fault == crate::status::FaultCode::Stopped as u16 {
             return out;
@@ -189,6 +196,11 @@ impl EventTracker {
             if row.fault != 0 {
                 let _ = out.push(EventKind::FaultRaised(row.fault));
             }
+        }
+        let unlike = row.status & status::UNLIKE_FISH != 0;
+        if unlike != self.unlike_fish {
+            let _ = out.push(EventKind::UnlikeFish(unlike));
+            self.unlike_fish = unlike;
         }
         if row.feeding != feeding {
             let _ = out.push(if row.feeding { EventKind::FeedingOn } else { EventKind::FeedingOff });
@@ -293,6 +305,10 @@ pub fn event_json(box_id: &str, row: &Row, kind: EventKind, out: &mut String) {
         EventKind::FaultRaised(c) | EventKind::FaultCleared(c) => {
             push_str(out, "fault", fault_name(c));
             let _ = write!(out, "\"fault_code\":{c},");
+        }
+        EventKind::UnlikeFish(raised) => {
+            let _ = write!(out, "\"unlike_fish\":{raised},\"n_fish\":{},", row.n_fish);
+            push_num(out, "mean_mps", row.activity_mps, 4);
         }
         EventKind::ScaleSource { from, to } => {
             push_str(out, "from", from.name());
@@ -923,6 +939,7 @@ mod tests {
             fault,
             feeding,
             scale: ScaleSource::References,
+            unlike_fish: false,
         }
     }
 
@@ -958,7 +975,8 @@ mod tests {
         assert_eq!(v["status"]["running"], true);
         assert_eq!(v["status"]["telemetry_fault"], true);
         assert_eq!(v["status"]["stale"], false);
-        assert_eq!(v["status"].as_object().map(|o| o.len()), Some(10));
+        assert_eq!(v["status"].as_object().map(|o| o.len()), Some(11));
+        assert_eq!(v["status"]["unlike_fish"], false);
         assert_eq!(v["status_bits"], u64::from(status::RUNNING | status::TELEMETRY_FAULT));
         assert_eq!(v["fault"], "camera");
         assert_eq!(v["fault_code"], 1);
@@ -1024,6 +1042,30 @@ mod tests {
     }
 
     #[test]
+    fn unlike_fish_is_an_event_when_raised_and_when_cleared() {
+        let mut t = EventTracker::default();
+        let flagged = |fault| Row { status: row(0, false).status | status::UNLIKE_FISH, ..row(fault, false) };
+        assert!(t.update(&row(0, false), ScaleSource::References).is_empty());
+        assert_eq!(
+            t.update(&flagged(7), ScaleSource::References)[..],
+            [EventKind::FaultRaised(7), EventKind::UnlikeFish(true)]
+        );
+        assert!(t.update(&flagged(7), ScaleSource::References).is_empty(), "no event while it stays raised");
+        // Under a more severe fault the bit still says it, and its clearing is an event of its own.
+        assert_eq!(
+            t.update(&flagged(1), ScaleSource::References)[..],
+            [EventKind::FaultCleared(7), EventKind::FaultRaised(1)]
+        );
+        assert_eq!(t.update(&row(1, false), ScaleSource::References)[..], [EventKind::UnlikeFish(false)]);
+        let mut s = String::new();
+        event_json("b", &flagged(7), EventKind::UnlikeFish(true), &mut s);
+        let v: serde_json::Value = serde_json::from_str(&s).expect(&s);
+        assert_eq!(v["event"], "unlike_fish_raised");
+        assert_eq!(v["unlike_fish"], true);
+        assert_eq!(v["n_fish"], 7);
+    }
+
+    #[test]
     fn queue_drops_oldest_and_requeues_in_front() {
         let a = |seq| Item::Activity { seq, row: row(0, false) };
         let mut q = Queue::new(3);
@@ -1046,7 +1088,7 @@ mod tests {
 
     #[test]
     fn fault_names_cover_the_codes() {
-        for c in 0..=6 {
+        for c in 0..=7 {
             assert_ne!(fault_name(c), "unknown");
         }
         assert_eq!(fault_name(99), "unknown");

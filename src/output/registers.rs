@@ -66,6 +66,11 @@ pub mod status {
     /// Bit 9: telemetry fault: MQTT is on and the broker refused the login or the TLS handshake
     /// failed (retried with backoff; docs/mqtt.md). The Modbus outputs are unaffected.
     pub const TELEMETRY_FAULT: u16 = 1 << 9;
+    /// Bit 10: the detections look unlike fish: their scores, sizes, nesting, tracks and count
+    /// have left the range measured on the training data for `familiarity.raise_after_s`
+    /// (`[familiarity]`, docs/pipeline.md). The value is not to be trusted; the feeding rule does
+    /// not act on it (feeding recommended is off).
+    pub const UNLIKE_FISH: u16 = 1 << 10;
 }
 
 pub use crate::status::FaultCode;

@@ -20,6 +20,7 @@ use super::{
     StageHealth, TrackRecord,
 };
 use crate::config::Config;
+use crate::familiarity::FamiliarityMonitor;
 use crate::geometry::{Camera, PixelBox};
 use crate::infer::{self, DepthNet, Detector, FramePlan, InferSchedule, RgbFrame};
 use crate::metric::{
@@ -54,6 +55,8 @@ pub struct FishPipeline {
     depth: Option<DepthNet>,
     substitute: Option<Box<dyn Substitute>>,
     tracker: Tracker,
+    /// "Detections look unlike fish" (`[familiarity]`).
+    familiarity: FamiliarityMonitor,
     estimator: ActivityEstimator,
     refs: ReferencePoints,
     footprints: ReferenceFootprints,
@@ -130,6 +133,7 @@ impl FishPipeline {
         cfg.tracker.validate().map_err(|e| format!("tracker: {e}"))?;
         cfg.motion.validate().map_err(str::to_string)?;
         cfg.postprocess.validate().map_err(str::to_string)?;
+        cfg.familiarity.validate()?;
         let needs_detector = !sub.as_ref().is_some_and(|s| s.replaces_tracks() || s.replaces_detector());
         let needs_depth = !sub.as_ref().is_some_and(|s| s.replaces_depth());
         if needs_detector || needs_depth {
@@ -168,6 +172,7 @@ impl FishPipeline {
             depth,
             substitute: sub,
             tracker: Tracker::new(cfg.tracker),
+            familiarity: FamiliarityMonitor::new(cfg.familiarity),
             estimator: ActivityEstimator::new(camera, cfg.motion, cfg.postprocess),
             calib: CalibInfo { references_visible: refs.len() as u32, ..CalibInfo::default() },
             refs,
@@ -258,6 +263,7 @@ impl FishPipeline {
         self.schedule = InferSchedule::new(self.cfg.detector.rate_hz, self.cfg.depth.rate_hz);
         self.rulers.clear();
         self.learned_length.reset();
+        self.familiarity.reset();
     }
 
     /// Refits on the current depth map (eq. 1-2) as `depth.scale` says: on the references, or on the
@@ -443,9 +449,12 @@ impl FishPipeline {
         }
         self.health.detector_ok = true;
         self.det_rate.record(t.0);
-        self.tracker
+        let matched = self
+            .tracker
             .update(t, &self.dets)
             .map_err(|e| PipelineError::Stage { stage: "tracker", message: e.to_string() })?;
+        self.familiarity.observe(t.0, self.dets.iter().map(|d| (d.bbox, d.score)), matched.iter().map(|o| o.id));
+        self.health.familiarity = self.familiarity.state();
         Ok(())
     }
 
@@ -589,6 +598,7 @@ impl Pipeline for FishPipeline {
                 too_few_fish: (s.n_fish as u32) < self.cfg.motion.min_fish,
                 depth_uncalibrated: !metric,
                 stale: false,
+                unlike_fish: self.familiarity.unlike_fish(),
             },
             scale: self.calib.source,
         }))

@@ -27,7 +27,7 @@ pub use substitute::{DepthView, Substitute};
 
 use crate::units::{MetresPerSecond, Seconds};
 
-/// Quality flags of an activity sample (mirrored in the status register bits 3, 4 and 6).
+/// Quality flags of an activity sample (mirrored in the status register bits 3, 4, 6 and 10).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct QualityFlags {
     /// Fewer tracked fish than `motion.min_fish`.
@@ -36,6 +36,9 @@ pub struct QualityFlags {
     pub depth_uncalibrated: bool,
     /// The value is older than `output.stale_after_s` (set by the service, not the pipeline).
     pub stale: bool,
+    /// The detections look unlike fish (`[familiarity]`, status bit 10): the value is not to be
+    /// trusted, and the feeding rule does not act on it.
+    pub unlike_fish: bool,
 }
 
 /// One activity sample (paper eq. 5: mean over tracked fish of each fish's 3D speed at a frame).
@@ -74,6 +77,8 @@ pub struct StageHealth {
     pub depth_hz: f64,
     /// Tracks currently confirmed.
     pub tracks: u32,
+    /// The familiarity monitor's state ("detections look unlike fish", `[familiarity]`).
+    pub familiarity: crate::familiarity::FamiliarityState,
 }
 
 /// Metric depth calibration state (paper eq. 1-2), shown by the console `calib` command.

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 /// The CSV header of [`SeriesWriter`].
 pub const HEADER: &str =
-    "frame,t,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,latency_s,too_few_fish,uncalibrated,scale";
+    "frame,t,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,latency_s,too_few_fish,uncalibrated,scale,unlike_fish";
 
 /// One row: the frame number (1-based, in delivery order) and the sample computed on it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -61,7 +61,7 @@ impl SeriesWriter {
         let s = &row.sample;
         writeln!(
             self.out,
-            "{},{},{},{},{},{},{},{},{},{},{}{extra}",
+            "{},{},{},{},{},{},{},{},{},{},{},{}{extra}",
             row.frame,
             s.timestamp.0,
             Field(opt(s.mean.0)),
@@ -72,7 +72,8 @@ impl SeriesWriter {
             s.latency.0,
             u8::from(s.flags.too_few_fish),
             u8::from(s.flags.depth_uncalibrated),
-            s.scale.name()
+            s.scale.name(),
+            u8::from(s.flags.unlike_fish)
         )
         .map_err(|e| format!("{}: {e}", self.path.display()))
     }

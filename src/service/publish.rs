@@ -80,7 +80,9 @@ impl Publisher {
         let stalled =
             h.camera_ok && h.last_processed_at.is_none_or(|t| now.saturating_duration_since(t) > self.stall_after);
         let uptime = now.saturating_duration_since(h.started);
-        let smoothed = sample.map(|s| s.smoothed.get());
+        // A value whose detections look unlike fish is no usable value for the feeding rule.
+        let unlike_fish = h.last_sample.is_some_and(|s| s.flags.unlike_fish);
+        let smoothed = sample.filter(|s| !s.flags.unlike_fish).map(|s| s.smoothed.get());
         let feeding = if stopped { false } else { self.feeding.update(uptime.as_secs_f64(), smoothed) };
         let mut bits = 0;
         if !stopped {
@@ -113,6 +115,9 @@ impl Publisher {
         if h.mqtt.link == crate::status::MqttLink::AuthFailed {
             bits |= status::TELEMETRY_FAULT;
         }
+        if unlike_fish {
+            bits |= status::UNLIKE_FISH;
+        }
         let client = matches!(self.mode, ModbusMode::TcpClient | ModbusMode::RtuClient);
         let fault = if stopped {
             FaultCode::Stopped
@@ -124,6 +129,8 @@ impl Publisher {
             FaultCode::Detector
         } else if h.frames_processed > 0 && !h.stage.depth_ok {
             FaultCode::Depth
+        } else if unlike_fish {
+            FaultCode::UnlikeFish
         } else if client && !plc_link_ok {
             FaultCode::PlcLink
         } else {
@@ -184,6 +191,7 @@ impl Publisher {
                 fault: inp.fault as u16,
                 feeding: inp.feeding,
                 scale,
+                unlike_fish: inp.status & status::UNLIKE_FISH != 0,
             };
             if let Some(h) = &self.history {
                 h.send(row);
@@ -195,5 +203,73 @@ impl Publisher {
         self.last_publish = Some(now);
         crate::output::serial_line::format_line(&inp, &mut self.line);
         &self.line
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::{ActivitySample, QualityFlags, ScaleSource};
+    use crate::units::{MetresPerSecond, Seconds};
+
+    fn health(unlike_fish: bool, now: Instant) -> Health {
+        let mut h = Shared::new(String::new(), 4).health();
+        h.camera_ok = true;
+        h.stage.detector_ok = true;
+        h.stage.depth_ok = true;
+        h.frames_processed = 1;
+        h.last_processed_at = Some(now);
+        h.last_sample_at = Some(now);
+        h.last_sample = Some(ActivitySample {
+            timestamp: Seconds(1.0),
+            mean: MetresPerSecond(0.5),
+            mean_body_lengths: 1.4,
+            smoothed: MetresPerSecond(0.5),
+            ci95_half: MetresPerSecond(0.05),
+            fish: 20,
+            latency: Seconds(0.5),
+            flags: QualityFlags { unlike_fish, ..QualityFlags::default() },
+            scale: ScaleSource::References,
+        });
+        h
+    }
+
+    #[test]
+    fn unlike_fish_sets_bit_10_and_fault_7_and_the_feeding_rule_does_not_act() {
+        let cfg = Config::default();
+        let mut p = Publisher::new(&cfg, Arc::new(RegisterBank::new()));
+        let t0 = Instant::now();
+        let mut h = health(false, t0);
+        h.started = t0;
+        // Well above feeding.on_above_mps for longer than min_off_s: feeding goes on.
+        let mut feeding_on_at = None;
+        for s in 0..=cfg.feeding.min_off_s as u64 + 1 {
+            let now = t0 + Duration::from_secs(s);
+            (h.last_sample_at, h.last_processed_at) = (Some(now), Some(now));
+            let inp = p.inputs(&h, true, 0, now, false);
+            assert_eq!(inp.status & status::UNLIKE_FISH, 0);
+            assert_eq!(inp.fault, FaultCode::None);
+            if inp.feeding && feeding_on_at.is_none() {
+                feeding_on_at = Some(s);
+            }
+        }
+        assert!(feeding_on_at.is_some(), "feeding on with a familiar value");
+        // The same value, flagged: bit 10, fault 7, feeding off at once, and not back on while flagged.
+        let mut flagged = health(true, t0);
+        flagged.started = t0;
+        for s in 0..2 * cfg.feeding.min_off_s as u64 {
+            let now = t0 + Duration::from_secs(cfg.feeding.min_off_s as u64 + 2 + s);
+            (flagged.last_sample_at, flagged.last_processed_at) = (Some(now), Some(now));
+            let inp = p.inputs(&flagged, true, 0, now, false);
+            assert_ne!(inp.status & status::UNLIKE_FISH, 0, "bit 10 at {s} s");
+            assert_eq!(inp.fault, FaultCode::UnlikeFish);
+            assert!(!inp.feeding, "the feeding rule does not act on a flagged value ({s} s)");
+            assert!((inp.mean_mps - 0.5).abs() < 1e-9, "the value itself is still published");
+        }
+        // A camera fault is more severe.
+        flagged.camera_ok = false;
+        let inp = p.inputs(&flagged, true, 0, t0 + Duration::from_secs(10_000), false);
+        assert_eq!(inp.fault, FaultCode::Camera);
+        assert_ne!(inp.status & status::UNLIKE_FISH, 0);
     }
 }

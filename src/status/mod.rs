@@ -429,6 +429,8 @@ pub enum FaultCode {
     PlcLink = 5,
     /// 6: the daemon has stopped (final write before exit).
     Stopped = 6,
+    /// 7: the detections look unlike fish (status bit 10, `[familiarity]`).
+    UnlikeFish = 7,
 }
 
 #[cfg(test)]

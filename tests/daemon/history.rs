@@ -125,6 +125,7 @@ fn write_day(dir: &Path, day: &str) {
             fault,
             feeding: (12.0..13.0).contains(&h),
             scale: fme::pipeline::ScaleSource::Fish,
+            unlike_fish: false,
         })
         .expect("write");
     }
@@ -178,6 +179,7 @@ fn report_bad_input_exits_2_naming_the_file_and_line() {
                 fault: 0,
                 feeding: false,
                 scale: fme::pipeline::ScaleSource::References,
+                unlike_fish: false,
             },
             &mut text,
         );

@@ -148,7 +148,7 @@ impl Pipeline for FrameDiffPipeline {
             ci95_half: MetresPerSecond(ci),
             fish: 0,
             latency: Seconds(0.0),
-            flags: QualityFlags { too_few_fish: true, depth_uncalibrated: true, stale: false },
+            flags: QualityFlags { too_few_fish: true, depth_uncalibrated: true, stale: false, unlike_fish: false },
             scale: fme::pipeline::ScaleSource::None,
         }))
     }
