@@ -2,9 +2,10 @@
 //! sequence's frame rate and looping (like a camera that never stops), or as fast as possible.
 
 use super::{CaptureError, Frame, FrameSource, PixelFormat};
+use crate::sequence::{MAX_FRAME_RATE, MIN_FRAME_RATE};
 use crate::units::Seconds;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// A recorded sequence played as a camera.
 #[derive(Debug)]
@@ -40,8 +41,13 @@ impl RecordedSource {
         let ini = std::fs::read_to_string(&ini_path).map_err(|e| open_err(format!("{}: {e}", ini_path.display())))?;
         let fps: f64 = ini_value(&ini, "frameRate")
             .and_then(|v| v.parse().ok())
-            .filter(|f: &f64| f.is_finite() && *f > 0.0)
-            .ok_or_else(|| open_err(format!("{}: missing or invalid frameRate", ini_path.display())))?;
+            .filter(|f: &f64| (MIN_FRAME_RATE..=MAX_FRAME_RATE).contains(f))
+            .ok_or_else(|| {
+                open_err(format!(
+                    "{}: missing or invalid frameRate (must be {MIN_FRAME_RATE}..={MAX_FRAME_RATE} frames/s)",
+                    ini_path.display()
+                ))
+            })?;
         let im_dir = ini_value(&ini, "imDir").unwrap_or("img1");
         let ext = ini_value(&ini, "imExt").unwrap_or(".jpg").to_ascii_lowercase();
         let img_dir = dir.join(im_dir);
@@ -91,10 +97,11 @@ impl FrameSource for RecordedSource {
         let timestamp = Seconds(self.delivered as f64 / self.fps);
         if self.realtime {
             let start = *self.start.get_or_insert_with(Instant::now);
-            let due = start + Duration::from_secs_f64(timestamp.get());
+            // Checked: a frame time no `Instant` can hold is simply due now (never a panic).
+            let due = timestamp.to_duration().ok().and_then(|d| start.checked_add(d));
             let now = Instant::now();
-            if due > now {
-                std::thread::sleep(due - now);
+            if let Some(wait) = due.and_then(|due| due.checked_duration_since(now)) {
+                std::thread::sleep(wait);
             }
         }
         let path = &self.files[idx];
