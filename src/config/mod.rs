@@ -6,6 +6,7 @@
 //! The pipeline sections are the stage modules' own types; this module composes and checks them.
 
 pub mod allow;
+pub mod files;
 mod lines;
 pub mod ranges;
 mod schema;

@@ -3,8 +3,8 @@
 //! the command with exit 2 and names the key, so nothing downstream (durations, timers, buffers) is
 //! ever built from 0, a negative, an infinite, a NaN or an absurdly large value.
 //!
-//! `config/fme.toml` and docs/configuration.md state the same ranges; a test checks that every key
-//! here exists in the configuration.
+//! `config/fme.toml` states each range above its key (a test checks it, and that every key here
+//! exists in the configuration); README.md's Configuration section describes the rule.
 
 /// One key's range: `lo..=hi` in `unit`, plus 0 when `zero` says what 0 means (`"off"`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -34,7 +34,8 @@ const DAY_S: f64 = 86_400.0;
 const WEEK_S: f64 = 7.0 * DAY_S;
 const HOUR_MS: f64 = 3_600_000.0;
 
-/// Every range, in `config/fme.toml` order.
+/// Every range, in `config/fme.toml` order. The tracker's score thresholds have none: any score
+/// (the SORT preset's `-inf`: no threshold) is a threshold; NaN is refused by the tracker's check.
 pub const RANGES: &[Range] = &[
     r("source.width", 1.0, 8192.0, "px"),
     r("source.height", 1.0, 8192.0, "px"),
@@ -54,9 +55,6 @@ pub const RANGES: &[Range] = &[
     z("depth.rate_hz", 0.01, 1000.0, "Hz", "every frame"),
     r("depth.threads", 1.0, 64.0, "threads"),
     r("depth.sample_radius", 0.0, 3.0, "map px"),
-    r("tracker.det_threshold", 0.0, 1.0, ""),
-    r("tracker.track_threshold", 0.0, 1.0, ""),
-    r("tracker.new_track_threshold", 0.0, 1.0, ""),
     r("tracker.iou_threshold", 0.0, 1.0, ""),
     r("tracker.low_iou_threshold", 0.0, 1.0, ""),
     r("tracker.unconfirmed_iou_threshold", 0.0, 1.0, ""),
@@ -183,6 +181,26 @@ mod tests {
         keys.sort_unstable();
         keys.dedup();
         assert_eq!(keys.len(), RANGES.len(), "a key is listed twice");
+    }
+
+    /// config/fme.toml states every range in the comments above its key.
+    #[test]
+    fn shipped_config_documents_every_range() {
+        let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/config/fme.toml")).expect("read");
+        let lines: Vec<&str> = text.lines().collect();
+        for range in RANGES {
+            let (section, name) = range.key.rsplit_once('.').expect("dotted");
+            let header = lines
+                .iter()
+                .position(|l| l.trim_start_matches("# ") == format!("[{section}]"))
+                .unwrap_or_else(|| panic!("no [{section}] in config/fme.toml"));
+            let at = (header + 1..lines.len())
+                .find(|&i| lines[i].trim_start_matches("# ").starts_with(&format!("{name} = ")))
+                .unwrap_or_else(|| panic!("{} not in config/fme.toml", range.key));
+            let block = lines[header + 1..at].iter().rev().take_while(|l| !l.is_empty() && !l.starts_with('['));
+            let want = format!("{}..={}", range.lo, range.hi);
+            assert!(block.clone().any(|l| l.starts_with('#') && l.contains(&want)), "{}: say {want}", range.key);
+        }
     }
 
     #[test]

@@ -58,6 +58,23 @@ pub enum ServiceError {
     },
 }
 
+/// What to say when the calibration has fewer references than the metric depth fit needs (2), so
+/// the fish set the scale: said at start (journal and console `log`), not left to be discovered.
+pub fn scale_note(cfg: &Config) -> Option<String> {
+    let c = Calibration::for_config(cfg).ok()??;
+    (c.references.len() < 2).then(|| {
+        format!(
+            "calibration {}: {} reference object(s), the metric depth fit needs at least 2: the fish set the scale \
+             (depth.scale = \"{}\", motion.body_length_m = {} m); speeds are only as right as that length \
+             (docs/pipeline.md, \"The fish as the ruler\")",
+            c.path.display(),
+            c.references.len(),
+            format!("{:?}", cfg.depth.scale).to_lowercase(),
+            cfg.motion.body_length_m.get(),
+        )
+    })
+}
+
 /// Builds the pipeline `fme run` uses: detector + tracker + depth + post-processing + motion (paper
 /// eq. 1-5), see [`crate::pipeline`]. Model, calibration and ONNX Runtime problems are
 /// [`ServiceError::Pipeline`] naming the config key and the file.
@@ -435,6 +452,9 @@ impl Daemon {
                 source.describe()
             ),
         );
+        if let Some(note) = scale_note(&cfg) {
+            shared.log(Level::WARN, note);
+        }
         let publisher = Arc::new(Mutex::new(Publisher::new(&cfg, &timing, bank.clone())));
         let mut other_threads = Vec::new();
         if let Some(dir) = history_dir(&cfg) {
