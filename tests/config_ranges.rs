@@ -60,8 +60,8 @@ fn build_and_run(cfg: &Config) -> Result<(), String> {
     let _ = publisher.inputs(&health, true, 0, Instant::now() + Duration::from_secs(1), false);
     let _ = publisher.publish(&shared, Instant::now(), false);
     let mut schedule = InferSchedule::new(cfg.detector.rate_hz, cfg.depth.rate_hz);
-    let mut tracker = Tracker::new(cfg.tracker.clone());
-    let mut est = ActivityEstimator::new(camera(), cfg.motion.clone(), cfg.postprocess.clone());
+    let mut tracker = Tracker::new(cfg.tracker);
+    let mut est = ActivityEstimator::new(camera(), cfg.motion, cfg.postprocess);
     let mut feeding = FeedingRule::new(cfg.feeding.clone());
     for i in 0..40 {
         let t = Seconds(f64::from(i) / 30.0);

@@ -154,7 +154,7 @@ impl TrackerConfig {
         if !(self.depth_weight >= 0.0 && self.depth_weight.is_finite()) {
             return Err(TrackerConfigError::Key("depth_weight".into(), format!("{} is not >= 0", self.depth_weight)));
         }
-        if !(self.buffer_rate >= 0.0) {
+        if self.buffer_rate.is_nan() || self.buffer_rate < 0.0 {
             return Err(TrackerConfigError::Key("buffer_rate".into(), format!("{} is not >= 0", self.buffer_rate)));
         }
         if !(self.buffer_max >= 0.0 && self.buffer_max.is_finite()) {
