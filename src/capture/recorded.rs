@@ -152,6 +152,22 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_frame_rate_no_timer_holds_is_refused_at_open() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::create_dir_all(dir.path().join("img1")).expect("mkdir");
+        image::GrayImage::from_pixel(4, 4, image::Luma([9])).save(dir.path().join("img1/000001.jpg")).expect("save");
+        for rate in ["1e-300", "0", "-1", "inf", "NaN", "1e300"] {
+            std::fs::write(dir.path().join("seqinfo.ini"), format!("[Sequence]\nframeRate={rate}\n")).expect("ini");
+            let e = RecordedSource::open(dir.path(), true, true).err().map(|e| e.to_string()).unwrap_or_default();
+            assert!(e.contains("frameRate") && e.contains("0.001..=10000"), "{rate}: {e:?}");
+        }
+        // The slowest accepted rate paces without a panic (the first frame is due at once).
+        std::fs::write(dir.path().join("seqinfo.ini"), "[Sequence]\nframeRate=0.001\n").expect("ini");
+        let mut s = RecordedSource::open(dir.path(), true, true).expect("open");
+        assert!(s.next_frame(Vec::new()).is_ok());
+    }
+
+    #[test]
     fn unreadable_frame_is_skipped_and_timestamps_stay_monotonic() {
         let dir = tempfile::tempdir().expect("tempdir");
         std::fs::create_dir_all(dir.path().join("img1")).expect("mkdir");
