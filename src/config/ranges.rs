@@ -151,7 +151,13 @@ pub fn check(doc: &toml::Value) -> Result<(), (String, String)> {
         let Some(v) = lookup(doc, range.key) else { continue };
         let Some(x) = v.as_float().or_else(|| v.as_integer().map(|i| i as f64)) else { continue };
         if !range.accepts(x) {
-            return Err((range.key.to_string(), format!("must be {}, got {x}", range.describe())));
+            // 1e20, not twenty-one digits.
+            let got = if x != 0.0 && x.is_finite() && !(1e-4..1e9).contains(&x.abs()) {
+                format!("{x:e}")
+            } else {
+                format!("{x}")
+            };
+            return Err((range.key.to_string(), format!("must be {}, got {got}", range.describe())));
         }
     }
     Ok(())
@@ -212,5 +218,11 @@ mod tests {
             assert!(!stale.accepts(bad), "{bad}");
         }
         assert!(stale.describe().contains("0.1..=86400 s"), "{}", stale.describe());
+        let doc = toml::Value::try_from(Config {
+            output: crate::config::OutputConfig { stale_after_s: 1e20, ..Default::default() },
+            ..Default::default()
+        })
+        .expect("serializes");
+        assert_eq!(check(&doc).map_err(|(_, m)| m), Err("must be 0.1..=86400 s, got 1e20".to_string()));
     }
 }
