@@ -115,7 +115,28 @@ impl Seconds {
     pub fn from_millis(ms: f64) -> Self {
         Self(ms / 1000.0)
     }
+
+    /// The [`std::time::Duration`] of this many seconds, or an error for a negative, NaN, infinite
+    /// or too large value (where `Duration::from_secs_f64` panics). Timers built from outside input
+    /// (the configuration, a recording's frame rate) go through this.
+    pub fn to_duration(self) -> Result<std::time::Duration, DurationError> {
+        let d = std::time::Duration::try_from_secs_f64(self.0).map_err(|_| DurationError(self.0))?;
+        // A timer adds the duration to `Instant::now()`: that must not overflow either (about 10^11 s
+        // on common platforms; a century is far below it).
+        if d > MAX_DURATION {
+            return Err(DurationError(self.0));
+        }
+        Ok(d)
+    }
 }
+
+/// Longest duration [`Seconds::to_duration`] gives: 100 years.
+pub const MAX_DURATION: std::time::Duration = std::time::Duration::from_secs(100 * 365 * 86_400);
+
+/// A number of seconds that is no duration: negative, NaN, infinite or over [`MAX_DURATION`].
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("{0} s is not a duration (must be finite, >= 0 and at most 100 years)")]
+pub struct DurationError(pub f64);
 
 #[cfg(test)]
 mod tests {
@@ -128,5 +149,15 @@ mod tests {
         assert_eq!(v * Seconds(2.0), Metres(6.0));
         assert!((v.in_body_lengths(Metres(0.5)) - 6.0).abs() < 1e-12);
         assert_eq!(format!("{:.2}", Metres(1.0)), "1.00 m");
+    }
+
+    #[test]
+    fn durations_are_checked_not_panicking() {
+        assert_eq!(Seconds(1.5).to_duration(), Ok(std::time::Duration::from_millis(1500)));
+        assert_eq!(Seconds(0.0).to_duration(), Ok(std::time::Duration::ZERO));
+        for bad in [-1.0, f64::NAN, f64::INFINITY, 1e20, 1e300] {
+            assert!(Seconds(bad).to_duration().is_err(), "{bad}");
+        }
+        assert!(Seconds(1e-300).to_duration().is_ok());
     }
 }

@@ -267,6 +267,27 @@ fn bad_input_exits_2_naming_the_problem() {
     let (code, err) = run(&bad, &[]);
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("bad.csv") && err.contains("line 3") && err.contains("6 fields"), "{err}");
+    // A name of 65,536 characters: a clear error, not a panic in the table.
+    let mut long = good.clone();
+    long[0].name = "n".repeat(65_536);
+    expect("long.csv", &long, &[], &["long.csv", "name of 65536 characters", "at most 64"]);
+    // --out into a folder that does not exist: what the user gave, so exit 2 naming --out.
+    let csv = write_csv(dir.path(), "good.csv", &good);
+    let missing = dir.path().join("no-such-folder/c.json");
+    let o = fme(&[
+        "calibrate",
+        "--frame",
+        FRAME,
+        "--points",
+        csv.to_str().unwrap(),
+        "--intrinsics",
+        &meta_json,
+        "--out",
+        missing.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("--out") && err.contains("no-such-folder"), "{err}");
 }
 
 /// Four or five references (no DLT; the plane-homography start is exact only for coplanar ones,

@@ -143,6 +143,50 @@ fn config_check_names_file_line_and_key() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("none.toml"));
 }
 
+/// `fme config check` checks the files a config names (exists, readable, parses), so a passing check
+/// means `fme run` does not stop at start for one: exit 2 naming the key and the file.
+#[test]
+fn config_check_checks_the_files_it_names() {
+    let fme = || {
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_fme"));
+        c.current_dir(env!("CARGO_MANIFEST_DIR"));
+        c
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path().display();
+    for (name, text) in [("bad.json", "{"), ("corrupt.onnx", "not an onnx model"), ("ca.pem", "no certificate")] {
+        std::fs::write(dir.path().join(name), text).expect("write");
+    }
+    let seq = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/swarm20");
+    let good =
+        format!("[source]\npath = \"{}\"\n[camera]\ncalibration = \"{}/meta.json\"\n", seq.display(), seq.display());
+    let cases = [
+        (format!("[camera]\ncalibration = \"{d}/missing.json\"\n"), "camera.calibration", "missing.json"),
+        (format!("[camera]\ncalibration = \"{d}/bad.json\"\n"), "camera.calibration", "bad.json"),
+        (format!("[detector]\nmodel = \"{d}/corrupt.onnx\"\n"), "detector.model", "not an ONNX model"),
+        (format!("[depth]\nmodel = \"{d}/missing.onnx\"\n"), "depth.model", "missing.onnx"),
+        (format!("[output.mqtt]\ntls = true\nca_file = \"{d}/ca.pem\"\n"), "output.mqtt.ca_file", "ca.pem"),
+        (
+            format!("[output.mqtt]\nusername = \"u\"\npassword_file = \"{d}/none\"\n"),
+            "output.mqtt.password_file",
+            "none",
+        ),
+        (format!("[source]\npath = \"{d}/no-such-recording\"\n"), "source.path", "no-such-recording"),
+    ];
+    for (i, (text, key, file)) in cases.iter().enumerate() {
+        let p = dir.path().join(format!("files{i}.toml"));
+        std::fs::write(&p, text).expect("write");
+        let out = fme().args(["config", "check"]).arg(&p).output().expect("run fme");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "case {i}: {err}");
+        assert!(err.contains(&format!("key `{key}`")) && err.contains(file), "case {i}: {err}");
+    }
+    let p = dir.path().join("good.toml");
+    std::fs::write(&p, good).expect("write");
+    let out = fme().args(["config", "check"]).arg(&p).output().expect("run fme");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
 /// `fme config show` prints the effective config with `--set` overrides; a bad `--set` is named.
 #[test]
 fn config_show_applies_overrides() {

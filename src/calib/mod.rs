@@ -15,6 +15,8 @@ pub mod pnp;
 use crate::geometry::{Camera, Intrinsics, Pixel, WorldPoint};
 use nalgebra::Vector3;
 
+/// Longest reference name accepted in a points CSV, characters (names label tables and overlays).
+pub const MAX_NAME_CHARS: usize = 64;
 /// One measured reference: the world position of its camera-facing face centre and its pixel.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Reference {
@@ -127,6 +129,12 @@ pub fn parse_points(text: &str) -> Result<Vec<Reference>, CalibError> {
         let name = fields[0].to_string();
         if name.is_empty() {
             return Err(CalibError::Csv { line, msg: "empty name".into() });
+        }
+        if name.chars().count() > MAX_NAME_CHARS {
+            return Err(CalibError::Csv {
+                line,
+                msg: format!("name of {} characters; at most {MAX_NAME_CHARS}", name.chars().count()),
+            });
         }
         let mut v = [0.0; 5];
         for (k, col) in ["x", "y", "z", "u", "v"].iter().enumerate() {

@@ -5,7 +5,7 @@ use super::{CaptureError, Frame, FrameSource, PixelFormat};
 use crate::sequence::{SeqInfo, frame_file_name};
 use crate::units::Seconds;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// A recorded sequence played as a camera.
 #[derive(Debug)]
@@ -89,10 +89,11 @@ impl FrameSource for RecordedSource {
         let timestamp = Seconds(self.delivered as f64 / self.fps);
         if self.realtime {
             let start = *self.start.get_or_insert_with(Instant::now);
-            let due = start + Duration::from_secs_f64(timestamp.get());
+            // Checked: a frame time no `Instant` can hold is simply due now (never a panic).
+            let due = timestamp.to_duration().ok().and_then(|d| start.checked_add(d));
             let now = Instant::now();
-            if due > now {
-                std::thread::sleep(due - now);
+            if let Some(wait) = due.and_then(|due| due.checked_duration_since(now)) {
+                std::thread::sleep(wait);
             }
         }
         let path = &self.files[idx];
@@ -141,6 +142,22 @@ impl FrameSource for RecordedSource {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_frame_rate_no_timer_holds_is_refused_at_open() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::create_dir_all(dir.path().join("img1")).expect("mkdir");
+        image::GrayImage::from_pixel(4, 4, image::Luma([9])).save(dir.path().join("img1/000001.jpg")).expect("save");
+        for rate in ["1e-300", "0", "-1", "inf", "NaN", "1e300"] {
+            std::fs::write(dir.path().join("seqinfo.ini"), format!("[Sequence]\nframeRate={rate}\n")).expect("ini");
+            let e = RecordedSource::open(dir.path(), true, true).err().map(|e| e.to_string()).unwrap_or_default();
+            assert!(e.contains("frameRate") && e.contains("0.001..=10000"), "{rate}: {e:?}");
+        }
+        // The slowest accepted rate paces without a panic (the first frame is due at once).
+        std::fs::write(dir.path().join("seqinfo.ini"), "[Sequence]\nframeRate=0.001\n").expect("ini");
+        let mut s = RecordedSource::open(dir.path(), true, true).expect("open");
+        assert!(s.next_frame(Vec::new()).is_ok());
+    }
 
     #[test]
     fn unreadable_frame_is_skipped_and_timestamps_stay_monotonic() {

@@ -203,7 +203,8 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     };
     let mut text = serde_json::to_string_pretty(&file).context("encoding the calibration")?;
     text.push('\n');
-    std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
+    // The path is what the user gave: a missing folder or no permission is a usage error (exit 2).
+    std::fs::write(out, text).map_err(|e| usage(format!("--out {}: {e}", out.display())))?;
     // Read back through the loader the daemon uses, so a file that it would reject is caught here.
     Calibration::load(out).map_err(|e| anyhow::anyhow!("the written calibration does not load: {e}"))?;
     if let Some(p) = &args.overlay {
@@ -251,13 +252,14 @@ fn grab(dev: &Path, config: &super::ConfigArgs, out: &Path) -> anyhow::Result<im
     let mut rgb = Vec::new();
     let (w, h) = f.to_rgb_into(&mut rgb).map_err(|e| anyhow::anyhow!("--source: decoding the frame: {e}"))?;
     let img = image::RgbImage::from_raw(w, h, rgb).ok_or_else(|| anyhow::anyhow!("--source: frame size mismatch"))?;
-    img.save(out).with_context(|| format!("writing the grabbed frame to {}", out.display()))?;
+    img.save(out).map_err(|e| usage(format!("--frame {}: writing the grabbed frame: {e}", out.display())))?;
     Ok(img)
 }
 
 /// The per-reference table: reprojection error in pixels and in metres at the reference's depth.
 fn table(refs: &[Reference], res: &[Residual]) -> String {
-    let w = refs.iter().map(|r| r.name.len()).max().unwrap_or(4).max(9);
+    // Names are at most `calib::MAX_NAME_CHARS` long; the cap keeps any width a format width.
+    let w = refs.iter().map(|r| r.name.chars().count()).max().unwrap_or(4).clamp(9, calib::MAX_NAME_CHARS);
     let mut s = format!(
         "{:<w$} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9} {:>9}\n",
         "reference", "x_m", "y_m", "z_m", "u_px", "v_px", "depth_m", "error_px", "error_m"
@@ -408,5 +410,5 @@ fn overlay(
             }
         }
     }
-    img.save_with_format(path, image::ImageFormat::Png).with_context(|| format!("writing {}", path.display()))
+    img.save_with_format(path, image::ImageFormat::Png).map_err(|e| usage(format!("--overlay {}: {e}", path.display())))
 }

@@ -14,7 +14,8 @@ pub struct ConfigCmdArgs {
 /// `fme config` actions.
 #[derive(Debug, clap::Subcommand)]
 pub enum Action {
-    /// Validate a file: exit 0, or 2 with a message naming the file, the line and the key.
+    /// Validate a file and every file it names (calibration, models, recording, MQTT TLS and
+    /// password files): exit 0, or 2 with a message naming the file, the line and the key.
     Check {
         /// The configuration file.
         file: PathBuf,
@@ -38,7 +39,10 @@ pub fn run(args: ConfigCmdArgs) -> anyhow::Result<()> {
     match args.action {
         Action::Check { file } => {
             let c = ConfigArgs { config: Some(file.clone()), set: Vec::new() };
-            c.load(&[])?;
+            let (cfg, _) = c.load(&[])?;
+            // The files it names, so that `fme run` with this file cannot stop at start for one.
+            crate::config::files::check(&cfg)
+                .map_err(|(key, message)| super::UsageError(format!("{}: key `{key}`: {message}", file.display())))?;
             super::write_stdout(&format!("{}: ok\n", file.display()))
         }
         Action::Show { file, config, set } => {

@@ -52,10 +52,17 @@ impl ConfigArgs {
     /// Loads the config with the command's convenience flags (`sugar`, as `--set` assignments)
     /// applied first and the explicit `--set`s after them. Errors are [`UsageError`]s (exit 2) that
     /// name the file and line, or the `--set`.
+    ///
+    /// The file must be valid on its own, as `fme config check` sees it: a flag or `--set` that
+    /// replaces a bad value (`mode = "udp"` under `--modbus-listen`) must not hide it, or the same
+    /// file fails later where nothing replaces it (the service).
     pub fn load(&self, sugar: &[String]) -> anyhow::Result<(crate::config::Config, String)> {
+        let usage = |e: crate::config::ConfigError| anyhow::Error::new(UsageError(e.to_string()));
         let sets: Vec<String> = sugar.iter().chain(&self.set).cloned().collect();
-        crate::config::Config::load_with(self.config.as_deref(), &sets)
-            .map_err(|e| anyhow::Error::new(UsageError(e.to_string())))
+        if let (Some(file), false) = (self.config.as_deref(), sets.is_empty()) {
+            crate::config::Config::load_with(Some(file), &[]).map_err(usage)?;
+        }
+        crate::config::Config::load_with(self.config.as_deref(), &sets).map_err(usage)
     }
 }
 

@@ -106,6 +106,8 @@ pub fn memory_kb() -> Option<(u64, u64)> {
 /// recording).
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let (cfg, text) = effective_config(&args)?;
+    // Before the (slow) source and model loading: a duration no timer holds is a config error (exit 2).
+    service::timing::Timing::from_config(&cfg).map_err(|e| UsageError(e.to_string()))?;
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("tokio runtime")?;
     let opts = RunOptions { max_frames: args.max_frames, series: args.series.clone() };
     rt.block_on(async move {
@@ -113,7 +115,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         let mut signals = Signals::install().context("installing the signal handlers")?;
         let source = open_source(&cfg)?;
         let pipeline = service::build_pipeline(&cfg).map_err(|e| UsageError(e.to_string()))?;
-        let mut daemon = Daemon::start(cfg, text, source, pipeline, opts).await?;
+        let mut daemon = Daemon::start(cfg, text, source, pipeline, opts).await.map_err(|e| match e {
+            e @ service::ServiceError::Timing(_) => anyhow::Error::new(UsageError(e.to_string())),
+            e => anyhow::Error::new(e),
+        })?;
         let (reason, fault) = loop {
             tokio::select! {
                 ev = signals.next() => match ev {

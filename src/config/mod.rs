@@ -6,7 +6,9 @@
 //! The pipeline sections are the stage modules' own types; this module composes and checks them.
 
 pub mod allow;
+pub mod files;
 mod lines;
+pub mod ranges;
 mod schema;
 mod stages;
 
@@ -139,30 +141,16 @@ impl Config {
         fn err(key: &str, msg: impl Into<String>) -> Result<(), (String, String)> {
             Err((key.to_string(), msg.into()))
         }
-        fn positive(key: &str, v: f64) -> Result<(), (String, String)> {
-            if v.is_finite() && v > 0.0 { Ok(()) } else { err(key, format!("must be a positive number, got {v}")) }
-        }
+        // Every duration, rate, size and count key against its documented range (`ranges::RANGES`).
+        let doc =
+            toml::Value::try_from(self).map_err(|e| ("?".to_string(), format!("cannot check the values: {e}")))?;
+        ranges::check(&doc)?;
         let s = &self.source;
         if s.path.as_os_str().is_empty() {
             return err("source.path", "must name a /dev/videoN device or a sequence directory");
         }
-        if s.width == 0 || s.height == 0 {
-            return err(if s.width == 0 { "source.width" } else { "source.height" }, "must be > 0 px");
-        }
-        if s.fps == 0 {
-            return err("source.fps", "must be > 0 frames/s");
-        }
-        if s.buffers == 0 || s.buffers > 32 {
-            return err("source.buffers", format!("must be 1..=32, got {}", s.buffers));
-        }
-        if s.timeout_ms == 0 {
-            return err("source.timeout_ms", "must be > 0 ms");
-        }
-        if s.queue_frames == 0 || s.queue_frames > 256 {
-            return err("source.queue_frames", format!("must be 1..=256, got {}", s.queue_frames));
-        }
-        if s.reconnect_min_ms == 0 || s.reconnect_min_ms > s.reconnect_max_ms {
-            return err("source.reconnect_min_ms", "must be > 0 and <= source.reconnect_max_ms");
+        if s.reconnect_min_ms > s.reconnect_max_ms {
+            return err("source.reconnect_min_ms", "must be <= source.reconnect_max_ms");
         }
         // The pipeline sections check themselves; their messages start with or name the key.
         let keyed = |m: &str| (m.split_whitespace().next().unwrap_or("?").to_string(), m.to_string());
@@ -182,11 +170,6 @@ impl Config {
         if self.depth.scale == crate::metric::DepthScale::Fish && self.motion.body_length().is_none() {
             return err("depth.scale", "\"fish\" needs the cohort's mean length: motion.body_length_m > 0");
         }
-        positive("output.rate_hz", self.output.rate_hz)?;
-        if self.output.rate_hz > 100.0 {
-            return err("output.rate_hz", "must be <= 100 Hz");
-        }
-        positive("output.stale_after_s", self.output.stale_after_s)?;
         let m = &self.output.modbus;
         match m.mode {
             ModbusMode::TcpServer if !is_host_port(&m.listen) => {
@@ -200,29 +183,8 @@ impl Config {
             }
             _ => {}
         }
-        if m.unit_id == 0 || m.unit_id > 247 {
-            return err("output.modbus.unit_id", format!("must be 1..=247, got {}", m.unit_id));
-        }
-        if m.baud == 0 {
-            return err("output.modbus.baud", "must be > 0");
-        }
-        if !(1..=2).contains(&m.stop_bits) {
-            return err("output.modbus.stop_bits", "must be 1 or 2");
-        }
-        if m.timeout_ms == 0 {
-            return err("output.modbus.timeout_ms", "must be > 0 ms");
-        }
-        if m.reconnect_min_ms == 0 || m.reconnect_min_ms > m.reconnect_max_ms {
-            return err("output.modbus.reconnect_min_ms", "must be > 0 and <= output.modbus.reconnect_max_ms");
-        }
-        if m.max_connections == 0 || m.max_connections > 64 {
-            return err("output.modbus.max_connections", format!("must be 1..=64, got {}", m.max_connections));
-        }
-        if m.max_connections_per_peer == 0 || m.max_connections_per_peer > 64 {
-            return err(
-                "output.modbus.max_connections_per_peer",
-                format!("must be 1..=64 (at most max_connections apply), got {}", m.max_connections_per_peer),
-            );
+        if m.reconnect_min_ms > m.reconnect_max_ms {
+            return err("output.modbus.reconnect_min_ms", "must be <= output.modbus.reconnect_max_ms");
         }
         if let Err(e) = allow::AllowList::parse(&m.allow) {
             return err("output.modbus.allow", e);
@@ -243,17 +205,8 @@ impl Config {
                 format!("must be a topic level without / + # or spaces (empty = host name), got {:?}", q.box_id),
             );
         }
-        if q.qos > 1 {
-            return err("output.mqtt.qos", format!("must be 0 or 1, got {}", q.qos));
-        }
-        if q.keepalive_s < 5 || q.keepalive_s > 3600 {
-            return err("output.mqtt.keepalive_s", format!("must be 5..=3600 s, got {}", q.keepalive_s));
-        }
-        if q.queue_messages == 0 || q.queue_messages > 100_000 {
-            return err("output.mqtt.queue_messages", format!("must be 1..=100000, got {}", q.queue_messages));
-        }
-        if q.reconnect_min_ms == 0 || q.reconnect_min_ms > q.reconnect_max_ms {
-            return err("output.mqtt.reconnect_min_ms", "must be > 0 and <= output.mqtt.reconnect_max_ms");
+        if q.reconnect_min_ms > q.reconnect_max_ms {
+            return err("output.mqtt.reconnect_min_ms", "must be <= output.mqtt.reconnect_max_ms");
         }
         if q.cert_file.as_os_str().is_empty() != q.key_file.as_os_str().is_empty() {
             let key = if q.key_file.as_os_str().is_empty() { "output.mqtt.key_file" } else { "output.mqtt.cert_file" };
@@ -276,60 +229,13 @@ impl Config {
         if let Err(e) = allow::AllowList::parse(&mx.allow) {
             return err("output.metrics.allow", e);
         }
-        if self.output.serial.baud == 0 {
-            return err("output.serial.baud", "must be > 0");
-        }
-        if self.console.baud == 0 {
-            return err("console.baud", "must be > 0");
-        }
-        if self.console.log_lines == 0 || self.console.log_lines > 10_000 {
-            return err("console.log_lines", "must be 1..=10000");
-        }
         let f = &self.feeding;
-        if !(f.on_above_mps.is_finite() && f.off_below_mps.is_finite()) || f.off_below_mps > f.on_above_mps {
-            return err("feeding.off_below_mps", "must be finite and <= feeding.on_above_mps (hysteresis)");
-        }
-        if !(f.min_on_s >= 0.0 && f.min_off_s >= 0.0) {
-            return err(if f.min_on_s >= 0.0 { "feeding.min_off_s" } else { "feeding.min_on_s" }, "must be >= 0 s");
-        }
-        positive("service.stall_after_s", self.service.stall_after_s)?;
-        if self.service.live_view_s.is_nan() || self.service.live_view_s < 0.0 {
-            return err("service.live_view_s", "must be >= 0 s");
-        }
-        if self.service.stop_grace_ms > 1500 {
-            return err("service.stop_grace_ms", "must be <= 1500 ms (shutdown must finish within 2 s)");
+        if f.off_below_mps > f.on_above_mps {
+            return err("feeding.off_below_mps", "must be <= feeding.on_above_mps (hysteresis)");
         }
         let r = &self.record;
-        positive("record.ring_s", r.ring_s)?;
-        if r.max_disk_mb == 0 {
-            return err("record.max_disk_mb", "must be > 0 MB");
-        }
-        if !(r.snapshot_every_s >= 0.0 && r.snapshot_every_s.is_finite()) {
-            return err("record.snapshot_every_s", "must be >= 0 s (0 = off)");
-        }
-        if r.keep_snapshots == 0 {
-            return err("record.keep_snapshots", "must be >= 1");
-        }
-        for (k, v) in [("record.alarm_low_mps", r.alarm_low_mps), ("record.alarm_high_mps", r.alarm_high_mps)] {
-            if !(v >= 0.0 && v.is_finite()) {
-                return err(k, "must be >= 0 m/s (0 = off)");
-            }
-        }
         if r.alarm_high_mps > 0.0 && r.alarm_high_mps <= r.alarm_low_mps {
             return err("record.alarm_high_mps", "must be > record.alarm_low_mps");
-        }
-        if !(r.freeze_min_gap_s >= 0.0 && r.freeze_min_gap_s.is_finite()) {
-            return err("record.freeze_min_gap_s", "must be >= 0 s");
-        }
-        if r.queue_frames == 0 || r.queue_frames > 1024 {
-            return err("record.queue_frames", format!("must be 1..=1024, got {}", r.queue_frames));
-        }
-        let h = &self.history;
-        if h.keep_days == 0 || h.keep_days > 36_500 {
-            return err("history.keep_days", format!("must be 1..=36500 days, got {}", h.keep_days));
-        }
-        if !(h.fsync_s.is_finite() && (0.0..=3600.0).contains(&h.fsync_s)) {
-            return err("history.fsync_s", format!("must be 0..=3600 s, got {}", h.fsync_s));
         }
         Ok(())
     }

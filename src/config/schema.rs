@@ -249,7 +249,9 @@ pub enum Parity {
 pub struct ModbusConfig {
     /// Role: `off`, `tcp-server`, `tcp-client`, `rtu-server`, `rtu-client`.
     pub mode: ModbusMode,
-    /// TCP server: address to listen on, HOST:PORT.
+    /// TCP server: address to listen on, HOST:PORT. The built-in default is `127.0.0.1:5020` (this
+    /// box only, an unprivileged port: a replay needs no root and does not collide with the
+    /// service); `boards/*.toml` set `0.0.0.0:502` for the PLC.
     pub listen: String,
     /// TCP client: the PLC's address, HOST:PORT.
     pub peer: String,
@@ -291,7 +293,7 @@ impl Default for ModbusConfig {
     fn default() -> Self {
         Self {
             mode: ModbusMode::TcpServer,
-            listen: "0.0.0.0:502".into(),
+            listen: "127.0.0.1:5020".into(),
             peer: "192.168.0.10:502".into(),
             unit_id: 1,
             word_order: WordOrder::HighFirst,

@@ -746,7 +746,8 @@ pub async fn spawn(
     let (listener, addr) = match bound {
         Ok(x) => x,
         Err(e) => {
-            let msg = format!("cannot listen on {} (output.metrics.listen): {e}", cfg.listen);
+            let hint = super::listen_hint::listen_hint(&e, "output.metrics.listen");
+            let msg = format!("cannot listen on {} (output.metrics.listen): {e}{hint}", cfg.listen);
             shared.log(Level::ERROR, format!("metrics: {msg}; the Prometheus endpoint is off, everything else runs"));
             shared.metrics.set_state(format!("failed: {msg}"));
             return None;

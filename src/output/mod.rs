@@ -6,6 +6,7 @@
 
 pub mod bank;
 pub mod feeding;
+pub mod listen_hint;
 pub mod log_throttle;
 pub mod metrics;
 pub mod modbus;

@@ -28,7 +28,10 @@ use tokio_modbus::{ExceptionCode, Request, Response};
 #[derive(Debug, thiserror::Error)]
 pub enum ModbusError {
     /// Binding the TCP listener failed.
-    #[error("modbus tcp server: cannot listen on {addr} (output.modbus.listen): {error}")]
+    #[error(
+        "modbus tcp server: cannot listen on {addr} (output.modbus.listen): {error}{}",
+        super::listen_hint::listen_hint(error, "output.modbus.listen")
+    )]
     Bind {
         /// The address.
         addr: String,

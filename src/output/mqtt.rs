@@ -559,7 +559,8 @@ fn classify(e: &ConnectionError) -> Failure {
     }
 }
 
-fn read_pem_certs(path: &Path) -> Result<Vec<rustls::pki_types::CertificateDer<'static>>, String> {
+/// The PEM certificates in `path` (at least one); the error names the file.
+pub(crate) fn read_pem_certs(path: &Path) -> Result<Vec<rustls::pki_types::CertificateDer<'static>>, String> {
     let f = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let certs: Vec<_> = rustls_pemfile::certs(&mut std::io::BufReader::new(f))
         .collect::<Result<_, _>>()
@@ -568,6 +569,14 @@ fn read_pem_certs(path: &Path) -> Result<Vec<rustls::pki_types::CertificateDer<'
         return Err(format!("{}: no PEM certificate in it", path.display()));
     }
     Ok(certs)
+}
+
+/// The PEM private key in `path`; the error names the file.
+pub(crate) fn read_pem_key(path: &Path) -> Result<rustls::pki_types::PrivateKeyDer<'static>, String> {
+    let f = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    rustls_pemfile::private_key(&mut std::io::BufReader::new(f))
+        .map_err(|e| format!("{}: {e}", path.display()))?
+        .ok_or_else(|| format!("{}: no PEM private key in it", path.display()))
 }
 
 /// The rustls client configuration of `s` (ring provider).
@@ -593,10 +602,7 @@ fn tls_config(s: &Settings) -> Result<rustls::ClientConfig, String> {
         return Ok(builder.with_no_client_auth());
     }
     let certs = read_pem_certs(&s.cert_file)?;
-    let f = std::fs::File::open(&s.key_file).map_err(|e| format!("{}: {e}", s.key_file.display()))?;
-    let key = rustls_pemfile::private_key(&mut std::io::BufReader::new(f))
-        .map_err(|e| format!("{}: {e}", s.key_file.display()))?
-        .ok_or_else(|| format!("{}: no PEM private key in it", s.key_file.display()))?;
+    let key = read_pem_key(&s.key_file)?;
     builder.with_client_auth_cert(certs, key).map_err(|e| format!("output.mqtt.cert_file/key_file: {e}"))
 }
 

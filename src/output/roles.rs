@@ -68,6 +68,16 @@ pub async fn spawn(
                 },
             )));
             shared.log(Level::INFO, format!("modbus tcp server on {addr}"));
+            // The built-in default serves this box only; a service needs the board config's address.
+            if addr.ip().is_loopback() && std::env::var_os("INVOCATION_ID").is_some() {
+                shared.log(
+                    Level::WARN,
+                    format!(
+                        "modbus tcp server listens on {addr}, this box only: a PLC on the network cannot \
+                         reach it. Set output.modbus.listen = \"0.0.0.0:502\" (as boards/*.toml do)"
+                    ),
+                );
+            }
         }
         ModbusMode::RtuServer => {
             // A missing RS-485 adapter is retried with backoff, not fatal.

@@ -199,7 +199,7 @@ impl Writer {
 impl Recorder {
     /// Starts the writer thread when there is a state directory; `None` when there is none (nothing
     /// is written to disk). A ring that cannot be created is logged and recording stays off.
-    pub fn start(cfg: &Config, shared: Arc<Shared>) -> Option<Self> {
+    pub fn start(cfg: &Config, freeze_gap: Duration, shared: Arc<Shared>) -> Option<Self> {
         let dir = crate::status::state_dir(cfg)?;
         let rc = &cfg.record;
         let ring = if rc.enabled {
@@ -289,7 +289,7 @@ impl Recorder {
             next_snapshot_t: None,
             alarm: (rc.alarm_low_mps, rc.alarm_high_mps),
             freeze_on_fault: rc.freeze_on_fault,
-            freeze_gap: Duration::from_secs_f64(rc.freeze_min_gap_s),
+            freeze_gap,
             last_auto: None,
             last_seen: (false, StageHealth::default(), 0),
             thread: Some(thread),

@@ -31,7 +31,7 @@ pub use rows::{
     GtBox, WORLD_HEADER, WorldRow, format_gt, format_world, parse_gt, parse_world, read_gt, read_world, write_gt,
     write_world,
 };
-pub use seqinfo::SeqInfo;
+pub use seqinfo::{MAX_FRAME_RATE, MIN_FRAME_RATE, SeqInfo};
 pub use writer::{SequenceWriter, StagedDir, encode_jpeg};
 
 /// Result type of the sequence module.

@@ -4,6 +4,12 @@ use super::{Error, Result};
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// Slowest `frameRate` a recording may give, frames/s (one frame per 1000 s): frame times stay
+/// durations a timer can hold.
+pub const MIN_FRAME_RATE: f64 = 0.001;
+/// Fastest `frameRate` a recording may give, frames/s.
+pub const MAX_FRAME_RATE: f64 = 10_000.0;
+
 /// The `[Sequence]` section of `seqinfo.ini`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SeqInfo {
@@ -62,8 +68,12 @@ impl SeqInfo {
                     let r: f64 = v
                         .parse()
                         .map_err(|_| Error::parse(path, line, format!("frameRate: expected a number, got {v:?}")))?;
-                    if !r.is_finite() || r <= 0.0 {
-                        return Err(Error::parse(path, line, format!("frameRate must be positive, got {v:?}")));
+                    if !(MIN_FRAME_RATE..=MAX_FRAME_RATE).contains(&r) {
+                        return Err(Error::parse(
+                            path,
+                            line,
+                            format!("frameRate must be {MIN_FRAME_RATE}..={MAX_FRAME_RATE} frames/s, got {v:?}"),
+                        ));
                     }
                     rate = Some(r);
                 }

@@ -16,6 +16,7 @@
 
 pub mod publish;
 pub mod signals;
+pub mod timing;
 
 use crate::capture::{Backoff, CaptureError, FrameQueue, FrameSource};
 use crate::config::Config;
@@ -41,6 +42,9 @@ pub enum ServiceError {
     /// The pipeline could not be built.
     #[error("pipeline: {0}")]
     Pipeline(String),
+    /// A configured duration no timer can hold (names the key; exit 2).
+    #[error(transparent)]
+    Timing(#[from] timing::TimingError),
     /// The `--series` file could not be created.
     #[error("--series: {0}")]
     Series(String),
@@ -52,6 +56,23 @@ pub enum ServiceError {
         /// The I/O error (in the message, not a separate cause: printed once).
         error: std::io::Error,
     },
+}
+
+/// What to say when the calibration has fewer references than the metric depth fit needs (2), so
+/// the fish set the scale: said at start (journal and console `log`), not left to be discovered.
+pub fn scale_note(cfg: &Config) -> Option<String> {
+    let c = Calibration::for_config(cfg).ok()??;
+    (c.references.len() < 2).then(|| {
+        format!(
+            "calibration {}: {} reference object(s), the metric depth fit needs at least 2: the fish set the scale \
+             (depth.scale = \"{}\", motion.body_length_m = {} m); speeds are only as right as that length \
+             (docs/pipeline.md, \"The fish as the ruler\")",
+            c.path.display(),
+            c.references.len(),
+            format!("{:?}", cfg.depth.scale).to_lowercase(),
+            cfg.motion.body_length_m.get(),
+        )
+    })
 }
 
 /// Builds the pipeline `fme run` uses: detector + tracker + depth + post-processing + motion (paper
@@ -414,6 +435,7 @@ impl Daemon {
         pipeline: Box<dyn Pipeline>,
         opts: RunOptions,
     ) -> Result<Self, ServiceError> {
+        let timing = timing::Timing::from_config(&cfg)?;
         let series_file = match &opts.series {
             Some(p) => Some(crate::pipeline::SeriesWriter::create(p, "").map_err(ServiceError::Series)?),
             None => None,
@@ -430,7 +452,10 @@ impl Daemon {
                 source.describe()
             ),
         );
-        let publisher = Arc::new(Mutex::new(Publisher::new(&cfg, bank.clone())));
+        if let Some(note) = scale_note(&cfg) {
+            shared.log(Level::WARN, note);
+        }
+        let publisher = Arc::new(Mutex::new(Publisher::new(&cfg, &timing, bank.clone())));
         let mut other_threads = Vec::new();
         if let Some(dir) = history_dir(&cfg) {
             let h = &cfg.history;
@@ -457,8 +482,7 @@ impl Daemon {
         let serial_tx = roles.serial_tx;
         other_threads.extend(roles.serial_thread);
         // The Prometheus endpoint: a port it cannot bind is logged and shown, never fatal.
-        let stale_after = Duration::from_secs_f64(cfg.output.stale_after_s);
-        let metrics = crate::output::metrics::spawn(&cfg.output.metrics, stale_after, &shared, &bank).await;
+        let metrics = crate::output::metrics::spawn(&cfg.output.metrics, timing.stale_after, &shared, &bank).await;
         if cfg.console.enabled {
             let (dev, baud, echo, sh, bk) =
                 (cfg.console.device.clone(), cfg.console.baud, cfg.console.echo, shared.clone(), bank.clone());
@@ -505,7 +529,7 @@ impl Daemon {
             None => None,
         };
         let (finished_tx, finished) = tokio::sync::watch::channel(false);
-        let mut recorder = crate::record::Recorder::start(&cfg, shared.clone());
+        let mut recorder = crate::record::Recorder::start(&cfg, timing.freeze_gap, shared.clone());
         if let Some(t) = recorder.as_mut().and_then(crate::record::Recorder::take_thread) {
             other_threads.push(t);
         }
@@ -515,7 +539,7 @@ impl Daemon {
             shared: shared.clone(),
             publisher: publisher.clone(),
             serial_tx: serial_tx.clone(),
-            output_period_s: 1.0 / cfg.output.rate_hz,
+            output_period_s: timing.output_period.as_secs_f64(),
             max_frames: opts.max_frames,
             series,
             series_dropped: 0,
@@ -533,7 +557,7 @@ impl Daemon {
         // Keepalive: with no samples (camera down, pipeline failing) the registers still update, so
         // the PLC sees the heartbeat, the stale bit and the fault code.
         let mut aux_tasks = Vec::new();
-        let period = Duration::from_secs_f64(1.0 / cfg.output.rate_hz);
+        let period = timing.output_period;
         let (sh, pb, stx) = (shared.clone(), publisher.clone(), serial_tx.clone());
         aux_tasks.push(tokio::spawn(async move {
             let mut tick = tokio::time::interval(period / 2);
@@ -551,9 +575,8 @@ impl Daemon {
                 }
             }
         }));
-        if cfg.service.live_view_s > 0.0 {
+        if let Some(every) = timing.live_view {
             let (sh, bk) = (shared.clone(), bank.clone());
-            let every = Duration::from_secs_f64(cfg.service.live_view_s);
             aux_tasks.push(tokio::spawn(async move {
                 let mut tick = tokio::time::interval(every);
                 loop {

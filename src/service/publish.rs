@@ -34,16 +34,16 @@ pub struct Publisher {
 }
 
 impl Publisher {
-    /// A publisher for `cfg` writing to `bank`.
-    pub fn new(cfg: &Config, bank: Arc<RegisterBank>) -> Self {
+    /// A publisher for `cfg` (with its checked `timing`) writing to `bank`.
+    pub fn new(cfg: &Config, timing: &super::timing::Timing, bank: Arc<RegisterBank>) -> Self {
         Self {
             bank,
             heartbeat: 0,
             feeding: FeedingRule::new(cfg.feeding.clone()),
             order: cfg.output.modbus.word_order,
             mode: cfg.output.modbus.mode,
-            stale_after: Duration::from_secs_f64(cfg.output.stale_after_s),
-            stall_after: Duration::from_secs_f64(cfg.service.stall_after_s),
+            stale_after: timing.stale_after,
+            stall_after: timing.stall_after,
             last_publish: None,
             line: String::with_capacity(128),
             stopped: false,

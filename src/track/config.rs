@@ -136,8 +136,14 @@ impl TrackerConfig {
         unit("iou_threshold", self.iou_threshold)?;
         unit("low_iou_threshold", self.low_iou_threshold)?;
         unit("unconfirmed_iou_threshold", self.unconfirmed_iou_threshold)?;
-        if self.det_threshold.is_nan() || self.track_threshold.is_nan() || self.new_track_threshold.is_nan() {
-            return Err(TrackerConfigError::Key("det_threshold".into(), "score thresholds must not be NaN".into()));
+        for (k, v) in [
+            ("det_threshold", self.det_threshold),
+            ("track_threshold", self.track_threshold),
+            ("new_track_threshold", self.new_track_threshold),
+        ] {
+            if v.is_nan() {
+                return Err(TrackerConfigError::Key(k.into(), "a score threshold must not be NaN".into()));
+            }
         }
         if !(self.max_age_s >= 0.0 && self.max_age_s.is_finite()) {
             return Err(TrackerConfigError::Key(
@@ -148,10 +154,13 @@ impl TrackerConfig {
         if !(self.depth_weight >= 0.0 && self.depth_weight.is_finite()) {
             return Err(TrackerConfigError::Key("depth_weight".into(), format!("{} is not >= 0", self.depth_weight)));
         }
-        if !(self.buffer_rate >= 0.0 && self.buffer_max >= 0.0 && self.buffer_max.is_finite()) {
+        if self.buffer_rate.is_nan() || self.buffer_rate < 0.0 {
+            return Err(TrackerConfigError::Key("buffer_rate".into(), format!("{} is not >= 0", self.buffer_rate)));
+        }
+        if !(self.buffer_max >= 0.0 && self.buffer_max.is_finite()) {
             return Err(TrackerConfigError::Key(
-                "buffer_rate".into(),
-                "buffer_rate and buffer_max must be >= 0".into(),
+                "buffer_max".into(),
+                format!("{} is not finite and >= 0", self.buffer_max),
             ));
         }
         if self.max_tracks == 0 || self.max_tracks > super::MAX_TRACKS {
@@ -161,8 +170,10 @@ impl TrackerConfig {
             ));
         }
         let n = self.noise;
-        if !(n.meas > 0.0 && n.accel > 0.0 && n.init_vel > 0.0) {
-            return Err(TrackerConfigError::Key("noise".into(), "meas, accel and init_vel must be > 0".into()));
+        for (k, v) in [("noise.meas", n.meas), ("noise.accel", n.accel), ("noise.init_vel", n.init_vel)] {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(TrackerConfigError::Key(k.into(), format!("{v} is not a finite number > 0")));
+            }
         }
         Ok(())
     }

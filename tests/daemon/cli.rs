@@ -371,4 +371,67 @@ fn port_in_use_is_a_runtime_fault_reported_once() {
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert_eq!(err.matches("in use").count(), 1, "printed once: {err}");
     assert!(err.contains("output.modbus.listen"), "{err}");
+    assert!(err.contains("--modbus-listen 127.0.0.1:0") && err.contains("output.modbus.mode=off"), "a hint: {err}");
+}
+
+#[test]
+fn one_reference_says_the_fish_set_the_scale() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let seq = dir.path().join("seq");
+    support::write_sequence(&seq, 5, 64, 48, 30);
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string("tests/data/swarm20/meta.json").expect("meta")).expect("json");
+    let mut one = meta.clone();
+    one["reference_objects"] = serde_json::Value::Array(vec![meta["reference_objects"][0].clone()]);
+    let one_ref = write(dir.path(), "one-ref.json", &one.to_string());
+    let cfg = write(
+        dir.path(),
+        "run.toml",
+        &format!("[camera]\ncalibration = \"{}\"\n[output.modbus]\nmode = \"off\"\n", one_ref.display()),
+    );
+    let out = fme()
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .arg("--source")
+        .arg(&seq)
+        .args(["--fast", "--no-loop"])
+        .output()
+        .expect("run fme");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(
+        err.contains("WARN") && err.contains("1 reference object(s)") && err.contains("the fish set the scale"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_flag_does_not_hide_a_bad_file_value() {
+    // `config check` refuses the file; `fme run` with the same file must too, whatever the flags replace.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cfg = write(dir.path(), "bad.toml", "[output.modbus]\nmode = \"udp\"\n");
+    let check = fme().args(["config", "check"]).arg(&cfg).output().expect("run fme");
+    assert_eq!(check.status.code(), Some(2));
+    let out = fme()
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .args(["--modbus-listen", "127.0.0.1:0", "--source", "/nonexistent/seq"])
+        .output()
+        .expect("run fme");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("output.modbus.mode") && err.contains("bad.toml:2:"), "{err}");
+}
+
+#[test]
+fn a_replay_needs_no_privileged_port() {
+    // The built-in default serves this box only, on an unprivileged port (boards/*.toml set 502).
+    let out = fme().args(["config", "show", "--set", "source.path=/dev/video1"]).output().expect("run fme");
+    let shown = String::from_utf8_lossy(&out.stdout);
+    let listen = shown.lines().find(|l| l.starts_with("listen = \"1")).unwrap_or_default();
+    assert_eq!(listen, "listen = \"127.0.0.1:5020\"", "{shown}");
+    for board in ["raspberry-pi-5", "jetson-orin-nano", "rk3588", "x86-64"] {
+        let text = std::fs::read_to_string(format!("boards/{board}.toml")).expect("board config");
+        assert!(text.contains("listen = \"0.0.0.0:502\""), "{board} must serve the PLC on 502");
+    }
 }
