@@ -237,7 +237,8 @@ mod tests {
     #[test]
     fn unlike_fish_sets_bit_10_and_fault_7_and_the_feeding_rule_does_not_act() {
         let cfg = Config::default();
-        let mut p = Publisher::new(&cfg, Arc::new(RegisterBank::new()));
+        let timing = super::super::timing::Timing::from_config(&cfg).expect("default timing");
+        let mut p = Publisher::new(&cfg, &timing, Arc::new(RegisterBank::new()));
         let t0 = Instant::now();
         let mut h = health(false, t0);
         h.started = t0;
