@@ -14,6 +14,6 @@ SEQ=${2:-../shared/realfish/mf25-seq2}
 py() { python3 -c "import json,sys; d=json.load(sys.stdin); print(json.dumps({k: d.get(k) for k in sys.argv[1:]}))" "$@"; }
 echo "detector $DET on $SEQ"
 "$BIN" eval --sequence "$SEQ" --boxes model --depth model --det-model "$DET" --json \
-  | py detection mota idf1 mean_activity_bls mean_activity_mps mean_fish depth_consistency depth_consistency_frames activity_frames
+  | py detection mota idf1 mean_activity_bls mean_activity_mps mean_fish depth_consistency depth_consistency_frames activity_frames unlike_fish_share
 "$BIN" eval --sequence "$SEQ" --boxes gt --depth model --det-model "$DET" --json \
   | py mean_activity_bls mean_activity_mps mean_fish depth_consistency activity_frames

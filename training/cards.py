@@ -163,8 +163,13 @@ Weights and code: MIT OR Apache-2.0 (this project). Trained only on synthetic fr
 generator; no third-party weights or data.
 
 ## Limits
-Synthetic data only: expect a domain gap on real sea-cage footage; fine-tune on labelled real
-frames (any Ultralytics-layout model can replace this one via `[detector] model`).
+Synthetic data only: on a real tank sequence it fires on fragments of fish (precision 0.07, recall
+0.20; docs/accuracy.md "Real footage"), and on the real sources' held-out splits it finds almost
+nothing. Fine-tune on labelled real frames (`make -C training finetune DATA=DIR`,
+docs/training.md "Train on your own cage"); any Ultralytics-layout model can replace this one via
+`[detector] model`. The real-fish recipe (`make -C training real`) trains on real images whose
+sources and CC BY 4.0 licences are listed in each `../shared/realfish/train/*/SOURCE.md`; its
+output is not bundled yet.
 """
 
 

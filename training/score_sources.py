@@ -1,0 +1,36 @@
+#!/usr/bin/env python3
+"""P / R of a detector ONNX file on each real source's held-out split (real.py) and on the renders'
+held-out sequences, the way train_real.py scores its own output (fme's letterbox, NMS 0.5, IoU 0.5):
+
+    FME_NET=480x288 python score_sources.py ../models/fish_det_int8.onnx [--real DIR] [--renders DATA/val]
+"""
+import argparse
+import os
+
+import data
+import evaluate
+import real
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("model")
+    ap.add_argument("--real", default=os.environ.get("REAL_DATA", os.path.join(HERE, "..", "..", "shared", "realfish", "train")))
+    ap.add_argument("--renders", default="/tmp/fme-train-data/val", help="held-out render sequences ('' : none)")
+    ap.add_argument("--nms-iou", type=float, default=0.5)
+    args = ap.parse_args()
+    val = real.load_pool(args.real, "val")
+    if args.renders:
+        images, boxes, _, _ = data.load_many(args.renders, every=5, with_depth=False)
+        val["renders"] = (images, boxes)
+    sess = evaluate.session(args.model)
+    for name, (images, boxes) in val.items():
+        ms = [evaluate.eval_detector(sess, images, boxes, c, args.nms_iou) for c in (0.25, 0.3, 0.4)]
+        print(f"{name} ({len(images)} images): " + ", ".join(
+            f"conf {m['conf']}: P {m['precision']:.3f} R {m['recall']:.3f}" for m in ms), flush=True)
+
+
+if __name__ == "__main__":
+    main()
