@@ -149,12 +149,20 @@ mod tests {
         std::fs::create_dir_all(dir.path().join("img1")).expect("mkdir");
         image::GrayImage::from_pixel(4, 4, image::Luma([9])).save(dir.path().join("img1/000001.jpg")).expect("save");
         for rate in ["1e-300", "0", "-1", "inf", "NaN", "1e300"] {
-            std::fs::write(dir.path().join("seqinfo.ini"), format!("[Sequence]\nframeRate={rate}\nseqLength=1\nimWidth=4\nimHeight=4\n")).expect("ini");
+            std::fs::write(
+                dir.path().join("seqinfo.ini"),
+                format!("[Sequence]\nframeRate={rate}\nseqLength=1\nimWidth=4\nimHeight=4\n"),
+            )
+            .expect("ini");
             let e = RecordedSource::open(dir.path(), true, true).err().map(|e| e.to_string()).unwrap_or_default();
             assert!(e.contains("frameRate") && e.contains("0.001..=10000"), "{rate}: {e:?}");
         }
         // The slowest accepted rate paces without a panic (the first frame is due at once).
-        std::fs::write(dir.path().join("seqinfo.ini"), "[Sequence]\nframeRate=0.001\nseqLength=1\nimWidth=4\nimHeight=4\n").expect("ini");
+        std::fs::write(
+            dir.path().join("seqinfo.ini"),
+            "[Sequence]\nframeRate=0.001\nseqLength=1\nimWidth=4\nimHeight=4\n",
+        )
+        .expect("ini");
         let mut s = RecordedSource::open(dir.path(), true, true).expect("open");
         assert!(s.next_frame(Vec::new()).is_ok());
     }
