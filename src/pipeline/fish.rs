@@ -96,7 +96,8 @@ impl std::fmt::Debug for FishPipeline {
 
 impl FishPipeline {
     /// The pipeline of `fme run`. `calibration`: the camera and reference objects (`None`:
-    /// uncalibrated; fish are tracked but no speed is reported). Errors name the config key and the
+    /// uncalibrated: the fish are the ruler when `depth.scale` and a fish length allow it, else no
+    /// speed is reported). Errors name the config key and the
     /// file (missing ONNX Runtime, missing or mismatched model).
     pub fn new(cfg: &Config, calibration: Option<Calibration>) -> Result<Self, String> {
         Self::build(cfg, calibration, None, infer::Backend::DEFAULT)

@@ -82,12 +82,28 @@ pub fn build_pipeline(cfg: &Config) -> Result<Box<dyn Pipeline>, ServiceError> {
     let calibration = Calibration::for_config(cfg).map_err(ServiceError::Pipeline)?;
     match &calibration {
         Some(c) => tracing::info!(file = %c.path.display(), references = c.references.len(), "camera calibration"),
-        None => tracing::warn!(
-            "no camera calibration (camera.calibration): fish are tracked but no speed is reported (status bit 3 clear)"
-        ),
+        None => tracing::warn!("{}", uncalibrated_message(cfg)),
     }
     let p = FishPipeline::new(cfg, calibration).map_err(ServiceError::Pipeline)?;
     Ok(Box::new(p))
+}
+
+/// What the box does without a camera calibration, for the start-up warning: with a fish length
+/// and `depth.scale` other than `references` the fish are the ruler and speeds are reported;
+/// otherwise fish are only counted.
+pub fn uncalibrated_message(cfg: &Config) -> String {
+    match (cfg.depth.scale, cfg.motion.body_length()) {
+        (crate::metric::DepthScale::Fish | crate::metric::DepthScale::Auto, Some(len)) => format!(
+            "no camera calibration (camera.calibration): the fish are the ruler (depth.scale = {}, \
+             motion.body_length_m = {} m, assumed lens): speeds in m/s and BL/s are reported once the fish fit \
+             holds (status bits 3 and 8 set); reference objects make m/s more accurate (docs/calibration.md)",
+            format!("{:?}", cfg.depth.scale).to_lowercase(),
+            len.0
+        ),
+        _ => "no camera calibration (camera.calibration) and no fish ruler (depth.scale = references or \
+              motion.body_length_m = 0): fish are tracked and counted but no speed is reported (status bit 3 clear)"
+            .to_string(),
+    }
 }
 
 /// The activity history's directory (`docs/history.md`): `history.dir` if set, else `history/` in
@@ -707,5 +723,22 @@ impl Daemon {
             }
         }
         self.shared.log(Level::INFO, format!("stopped in {} ms", t0.elapsed().as_millis()));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_uncalibrated_warning_says_what_the_box_will_do_with_its_scale() {
+        let cfg = Config::default();
+        let m = uncalibrated_message(&cfg);
+        assert!(m.contains("the fish are the ruler") && m.contains("are reported"), "{m}");
+        assert!(!m.contains("no speed"), "{m}");
+        let mut refs_only = cfg.clone();
+        refs_only.depth.scale = crate::metric::DepthScale::References;
+        let m = uncalibrated_message(&refs_only);
+        assert!(m.contains("no speed is reported") && m.contains("status bit 3 clear"), "{m}");
     }
 }
