@@ -27,6 +27,34 @@ fn recordings(state: &Path) -> Vec<PathBuf> {
 /// The whole bundled recording goes through the daemon with the black box on; `record save` (the
 /// console's mailbox) freezes it; `fme run` on the frozen recording gives the recorded series row
 /// for row, and the recorded series is the one the live run wrote with `--series`.
+/// The daemon on the bundled recording once through with `cfg`, then `record save LABEL`: the
+/// recordings in `state` once one appears (30 s at most) and the daemon's health at that time.
+async fn run_and_save(
+    cfg: Config,
+    text: String,
+    series: Option<PathBuf>,
+    label: &str,
+    state: &Path,
+) -> (Vec<PathBuf>, fme::status::Health) {
+    let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(Path::new(SEQ), false, false).expect("open"));
+    let pipeline = fme::service::build_pipeline(&cfg).expect("real pipeline");
+    let opts = RunOptions { max_frames: None, series };
+    let mut daemon = Daemon::start(cfg, text, source, pipeline, opts).await.expect("start");
+    assert!(tokio::time::timeout(Duration::from_secs(120), daemon.finished()).await.expect("ends"));
+    daemon.shared().requests.request_save(label);
+    let mut found = Vec::new();
+    for _ in 0..300 {
+        found = recordings(state);
+        if !found.is_empty() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let h = daemon.shared().health();
+    daemon.shutdown().await;
+    (found, h)
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn frozen_recording_replays_to_the_recorded_series() {
     std::env::set_current_dir(env!("CARGO_MANIFEST_DIR")).expect("cd");
@@ -45,23 +73,8 @@ async fn frozen_recording_replays_to_the_recorded_series() {
     ]
     .into();
     let (cfg, text) = Config::load_with(Some(Path::new("config/fme.toml")), &sets).expect("config");
-    let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(Path::new(SEQ), false, false).expect("open"));
-    let pipeline = fme::service::build_pipeline(&cfg).expect("real pipeline");
     let live = tmp.path().join("live.csv");
-    let opts = RunOptions { max_frames: None, series: Some(live.clone()) };
-    let mut daemon = Daemon::start(cfg, text, source, pipeline, opts).await.expect("start");
-    assert!(tokio::time::timeout(Duration::from_secs(120), daemon.finished()).await.expect("ends"));
-    daemon.shared().requests.request_save("replay test");
-    let mut found = Vec::new();
-    for _ in 0..300 {
-        found = recordings(&state);
-        if !found.is_empty() {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-    let h = daemon.shared().health();
-    daemon.shutdown().await;
+    let (found, h) = run_and_save(cfg, text, Some(live.clone()), "replay test", &state).await;
     assert_eq!(found.len(), 1, "one recording: {found:?} ({:?})", h.record);
     let rec = &found[0];
     assert!(rec.file_name().is_some_and(|n| n.to_string_lossy().ends_with("-replay-test")), "{rec:?}");
@@ -144,22 +157,7 @@ async fn a_recording_frozen_on_an_fme_calibrate_calibration_opens_in_fme_eval() 
     ]
     .into();
     let (cfg, text) = Config::load_with(Some(Path::new("config/fme.toml")), &sets).expect("config");
-    let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(Path::new(SEQ), false, false).expect("open"));
-    let pipeline = fme::service::build_pipeline(&cfg).expect("real pipeline");
-    let opts = RunOptions { max_frames: None, series: None };
-    let mut daemon = Daemon::start(cfg, text, source, pipeline, opts).await.expect("start");
-    assert!(tokio::time::timeout(Duration::from_secs(120), daemon.finished()).await.expect("ends"));
-    daemon.shared().requests.request_save("commissioning");
-    let mut found = Vec::new();
-    for _ in 0..300 {
-        found = recordings(&state);
-        if !found.is_empty() {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-    let h = daemon.shared().health();
-    daemon.shutdown().await;
+    let (found, h) = run_and_save(cfg, text, None, "commissioning", &state).await;
     assert_eq!(found.len(), 1, "one recording: {found:?} ({:?})", h.record);
     let rec = &found[0];
     // The recording carries the calibration as `fme calibrate` wrote it.

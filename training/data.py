@@ -53,6 +53,17 @@ def letterbox(img_rgb):
     return out
 
 
+def boxes_to_net(b, lb):
+    """Boxes (x, y, w, h, ...) in source pixels -> network input pixels, for the letterbox
+    lb = (gain, padx, pady) of `letterbox_params`."""
+    gain, padx, pady = lb
+    b = b.copy()
+    b[:, 0] = b[:, 0] * gain + padx
+    b[:, 1] = b[:, 1] * gain + pady
+    b[:, 2:4] *= gain
+    return b
+
+
 def read_gt(path):
     """frame -> list of (x, y, w, h, visibility) in source pixels."""
     boxes = {}
@@ -86,11 +97,7 @@ def load_sequence(seq, every=1, with_depth=True):
         h, w = rgb.shape[:2]
         gain, _nw, _nh, padx, pady = letterbox_params(w, h)
         imgs.append(letterbox(rgb))
-        b = np.array(gt.get(fr, []), np.float32).reshape(-1, 5)
-        b[:, 0] = b[:, 0] * gain + padx
-        b[:, 1] = b[:, 1] * gain + pady
-        b[:, 2:4] *= gain
-        boxes.append(b)
+        boxes.append(boxes_to_net(np.array(gt.get(fr, []), np.float32).reshape(-1, 5), (gain, padx, pady)))
         ids.append(fr)
         if with_depth:
             dpath = os.path.join(seq, "depth", os.path.splitext(name)[0] + ".png")

@@ -23,11 +23,7 @@ for d in $DATA; do
   dirs+=("$(realpath "$d")")
 done
 [ -f "$BASE" ] || { echo "finetune: BASE=$BASE: no such model" >&2; exit 2; }
-if [ ! -x "$VENV/bin/python" ]; then
-  echo "finetune: no Python stack in $VENV; creating it (about 6 GB, from training/requirements.txt)" >&2
-  python3 -m venv "$VENV"
-  "$VENV/bin/pip" install -q -r "$HERE/requirements.txt"
-fi
+VENV="$VENV" bash "$ROOT/scripts/setup_training.sh"
 cd "$HERE"
 FME_NET=480x288 "$VENV/bin/python" train_real.py --finetune "${dirs[@]}" --base "$BASE" --out "$OUT" \
   --budget-s "$BUDGET_S" ${TRAIN_ARGS:-}

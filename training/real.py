@@ -91,13 +91,9 @@ def letterboxed(path):
     return data.letterbox(rgb), (w, h), (gain, padx, pady)
 
 
-def to_net(b, lb):
-    gain, padx, pady = lb
-    b = b.copy()
-    b[:, 0] = b[:, 0] * gain + padx
-    b[:, 1] = b[:, 1] * gain + pady
-    b[:, 2:4] *= gain
-    return b
+def stacked(imgs):
+    """[N, H, W, 3] uint8 of the network-size images (N may be 0)."""
+    return np.stack(imgs) if imgs else np.zeros((0, data.NET_H, data.NET_W, 3), np.uint8)
 
 
 def yolo_items(folder):
@@ -125,12 +121,11 @@ def load_yolo(folder, source, split=None, limit=0):
             continue
         im, (w, h), lb = letterboxed(img_path)
         imgs.append(im)
-        boxes.append(to_net(read_yolo_labels(lab_path, w, h), lb))
+        boxes.append(data.boxes_to_net(read_yolo_labels(lab_path, w, h), lb))
         stems.append(stem)
         if limit and len(imgs) >= limit:
             break
-    images = np.stack(imgs) if imgs else np.zeros((0, data.NET_H, data.NET_W, 3), np.uint8)
-    return images, boxes, stems
+    return stacked(imgs), boxes, stems
 
 
 def seq_length(seq):
@@ -181,10 +176,9 @@ def load_mot(seq, split=None, every=1):
             continue
         im, _wh, lb = letterboxed(os.path.join(img_dir, name))
         imgs.append(im)
-        boxes.append(to_net(np.array(gt.get(fr, []), np.float32).reshape(-1, 5), lb))
+        boxes.append(data.boxes_to_net(np.array(gt.get(fr, []), np.float32).reshape(-1, 5), lb))
         stems.append(stem)
-    images = np.stack(imgs) if imgs else np.zeros((0, data.NET_H, data.NET_W, 3), np.uint8)
-    return images, boxes, stems
+    return stacked(imgs), boxes, stems
 
 
 def load_any(folder, split=None, every=1):

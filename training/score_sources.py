@@ -8,8 +8,8 @@ import argparse
 import os
 
 import data
-import evaluate
 import real
+from train_real import per_source_quality
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -25,12 +25,7 @@ def main():
     if args.renders:
         images, boxes, _, _ = data.load_many(args.renders, every=5, with_depth=False)
         val["renders"] = (images, boxes)
-    sess = evaluate.session(args.model)
-    for name, (images, boxes) in val.items():
-        ms = [evaluate.eval_detector(sess, images, boxes, c, args.nms_iou) for c in (0.25, 0.3, 0.4)]
-        print(f"{name} ({len(images)} images): " + ", ".join(
-            f"conf {m['conf']}: P {m['precision']:.3f} R {m['recall']:.3f}" for m in ms), flush=True)
-
+    per_source_quality(args.model, val, args.nms_iou, print, os.path.basename(args.model))
 
 if __name__ == "__main__":
     main()

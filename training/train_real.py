@@ -19,7 +19,6 @@ DIR's held-out part (real.held_out: blocks of frames, not single frames) before 
 import argparse
 import json
 import os
-import shutil
 import time
 
 import numpy as np
@@ -29,7 +28,7 @@ import data
 import det
 import evaluate
 import real
-from train import quantize_and_time
+from train import pick, quantize_and_time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 CONFS = (0.2, 0.25, 0.3, 0.35, 0.4, 0.5)
@@ -161,17 +160,12 @@ def main():
     for tag, path in paths.items():
         res[tag] = {"size_mb": round(os.path.getsize(path) / 1e6, 2), "ms_1_thread": ms[1][path],
                     "ms_2_threads": ms[2][path], "quality": per_source_quality(path, val, args.nms_iou, log, tag)}
-    a, b = res["int8_u8s8"], res["int8_s8s8"]
-    kept = "u8s8" if a["ms_2_threads"][0] <= b["ms_2_threads"][0] else "s8s8"
-    shutil.copyfile(os.path.join(args.out, f"fish_det_int8_{kept}.onnx"), os.path.join(args.out, "fish_det_int8.onnx"))
-    for t in ("u8s8", "s8s8"):
-        os.remove(os.path.join(args.out, f"fish_det_int8_{t}.onnx"))
-    res["int8_kept"] = kept
+    pick(args.out, "fish_det", res, log)
     res["torch"] = torch.__version__
     res["log"] = log_lines
     with open(os.path.join(args.out, "metrics.json"), "w") as f:
         json.dump(res, f, indent=1)
-    log(f"done in {time.time() - t0:.0f} s: {fp32}, fish_det_int8.onnx ({kept}), metrics.json in {args.out}")
+    log(f"done in {time.time() - t0:.0f} s: {fp32}, fish_det_int8.onnx ({res['int8_kept']}), metrics.json in {args.out}")
 
 
 if __name__ == "__main__":

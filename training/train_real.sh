@@ -24,10 +24,7 @@ ARCH=${ARCH:-full}
 NICE=${NICE:-10}
 FRAMES=${FRAMES:-24}
 [ -d "$REAL_DATA" ] || { echo "train_real.sh: REAL_DATA=$REAL_DATA: no such folder" >&2; exit 2; }
-if [ ! -x "$VENV/bin/python" ]; then
-  python3 -m venv "$VENV"
-  "$VENV/bin/pip" install -q -r "$HERE/requirements.txt"
-fi
+VENV="$VENV" bash "$ROOT/scripts/setup_training.sh"
 if [ -z "${FME_BIN:-}" ]; then
   (cd "$ROOT" && cargo build --release --locked --bin fme)
   FME_BIN="$ROOT/target/release/fme"

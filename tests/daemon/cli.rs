@@ -14,6 +14,15 @@ fn fme() -> Command {
     c
 }
 
+/// The bundled recording's calibration with only its first `keep` reference objects, written to `dir/name`.
+fn calibration_with_refs(dir: &std::path::Path, name: &str, keep: usize) -> std::path::PathBuf {
+    let mut meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string("tests/data/swarm20/meta.json").expect("meta")).expect("json");
+    let refs = meta["reference_objects"].as_array().map(|a| a[..keep].to_vec()).unwrap_or_default();
+    meta["reference_objects"] = serde_json::Value::Array(refs);
+    write(dir, name, &meta.to_string())
+}
+
 fn write(dir: &std::path::Path, name: &str, text: &str) -> std::path::PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, text).expect("write config");
@@ -309,14 +318,8 @@ fn each_broken_startup_input_exits_2_naming_the_file() {
     let dir = tempfile::tempdir().expect("tempdir");
     let seq = dir.path().join("seq");
     support::write_sequence(&seq, 5, 64, 48, 30);
-    let meta: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string("tests/data/swarm20/meta.json").expect("meta")).expect("json");
-    let mut one = meta.clone();
-    one["reference_objects"] = serde_json::Value::Array(vec![meta["reference_objects"][0].clone()]);
-    let one_ref = write(dir.path(), "one-ref.json", &one.to_string());
-    let mut none = meta.clone();
-    none["reference_objects"] = serde_json::Value::Array(vec![]);
-    let no_ref = write(dir.path(), "no-ref.json", &none.to_string());
+    let one_ref = calibration_with_refs(dir.path(), "one-ref.json", 1);
+    let no_ref = calibration_with_refs(dir.path(), "no-ref.json", 0);
     let corrupt = write(dir.path(), "corrupt.onnx", "not an onnx model");
     let no_ini = dir.path().join("no-ini");
     std::fs::create_dir_all(no_ini.join("img1")).expect("mkdir");
@@ -379,11 +382,7 @@ fn one_reference_says_the_fish_set_the_scale() {
     let dir = tempfile::tempdir().expect("tempdir");
     let seq = dir.path().join("seq");
     support::write_sequence(&seq, 5, 64, 48, 30);
-    let meta: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string("tests/data/swarm20/meta.json").expect("meta")).expect("json");
-    let mut one = meta.clone();
-    one["reference_objects"] = serde_json::Value::Array(vec![meta["reference_objects"][0].clone()]);
-    let one_ref = write(dir.path(), "one-ref.json", &one.to_string());
+    let one_ref = calibration_with_refs(dir.path(), "one-ref.json", 1);
     let cfg = write(
         dir.path(),
         "run.toml",
