@@ -4,7 +4,7 @@
 CARGO ?= cargo
 BIN := target/release/fme
 
-.PHONY: all setup setup-training build static static-copy static-check test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer bench-history bench-mqtt bench-backends bench-anchors four-groups clean
+.PHONY: all setup setup-training build install static static-copy static-check test lint fmt clippy demo demo-run bench bench-synth bench-core bench-daemon bench-track bench-infer bench-history bench-mqtt bench-backends bench-anchors four-groups clean
 
 all: build
 
@@ -18,6 +18,13 @@ setup-training:
 
 build: setup
 	$(CARGO) build --release --locked
+
+# Installs the release build, models, ONNX Runtime, the systemd unit and the docs under PREFIX
+# (below DESTDIR for packaging), and BOARD's config as /etc/fme/fme.toml unless one is there
+# (scripts/install.sh; docs/deployment.md#installing).
+PREFIX ?= /usr/local
+install: build
+	PREFIX="$(PREFIX)" DESTDIR="$(DESTDIR)" BOARD="$(BOARD)" STRIP="$(STRIP)" bash scripts/install.sh $(BIN)
 
 # One static executable (issue 36): the pure-Rust backend (tract) and the bundled models inside,
 # glibc's static-pie; nothing else needed beside it (docs/deployment.md#one-static-binary). For an

@@ -19,6 +19,8 @@ dpkg -s pkg-config >/dev/null 2>&1 || need_apt+=(pkg-config)
 command -v unzip >/dev/null 2>&1 || need_apt+=(unzip)
 # mosquitto_passwd (for the wrong-password test) comes with the same package.
 command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ] || need_apt+=(mosquitto)
+# socat: the documented way to reach the console without a serial port (tests/daemon/console_socat.rs).
+command -v socat >/dev/null 2>&1 || need_apt+=(socat)
 if [ ${#need_apt[@]} -gt 0 ]; then
   echo "setup: installing ${need_apt[*]} with apt" >&2
   $SUDO apt-get update -q >/dev/null

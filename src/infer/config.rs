@@ -52,10 +52,21 @@ pub struct DetectorConfig {
     pub num_classes: Option<usize>,
 }
 
+/// The bundled detector in the form this build's default backend runs fastest: int8 with ONNX
+/// Runtime; fp32 with tract alone (the static binary), which runs the fp32 graph faster than the
+/// int8 one and matches ONNX Runtime's results on it (docs/benchmarks.md#backends).
+pub const DEFAULT_DETECTOR_MODEL: &str =
+    if cfg!(feature = "ort") { "models/fish_det_int8.onnx" } else { "models/fish_det_fp32.onnx" };
+
+/// The bundled depth network in the form this build's default backend runs fastest (as
+/// [`DEFAULT_DETECTOR_MODEL`]).
+pub const DEFAULT_DEPTH_MODEL: &str =
+    if cfg!(feature = "ort") { "models/fish_depth_int8.onnx" } else { "models/fish_depth_fp32.onnx" };
+
 impl Default for DetectorConfig {
     fn default() -> Self {
         Self {
-            model: PathBuf::from("models/fish_det_int8.onnx"),
+            model: PathBuf::from(DEFAULT_DETECTOR_MODEL),
             rate_hz: 10.0,
             confidence: 0.3,
             nms_iou: 0.5,
@@ -143,7 +154,7 @@ pub struct DepthConfig {
 impl Default for DepthConfig {
     fn default() -> Self {
         Self {
-            model: PathBuf::from("models/fish_depth_int8.onnx"),
+            model: PathBuf::from(DEFAULT_DEPTH_MODEL),
             rate_hz: 5.0,
             threads: 1,
             spin: false,
@@ -232,6 +243,7 @@ fn size(key: &'static str, s: Option<[u32; 2]>) -> Result<(), InferError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::path::Path;
 
     #[test]
     fn defaults_validate_and_parse_from_toml() {
@@ -241,6 +253,19 @@ mod tests {
         assert_eq!(d.nms_iou, 0.4);
         assert_eq!(d.confidence, 0.3);
         assert!(toml::from_str::<DetectorConfig>("modle = \"a.onnx\"").is_err());
+    }
+
+    #[test]
+    fn each_backend_defaults_to_the_model_form_it_runs_fastest() {
+        let (det, depth) = (DetectorConfig::default().model, DepthConfig::default().model);
+        let form = if cfg!(feature = "ort") { "int8" } else { "fp32" };
+        assert_eq!(det, PathBuf::from(format!("models/fish_det_{form}.onnx")));
+        assert_eq!(depth, PathBuf::from(format!("models/fish_depth_{form}.onnx")));
+        // Both forms are bundled, so the default resolves in a checkout and in the static binary.
+        for m in [&det, &depth] {
+            let in_repo = Path::new(env!("CARGO_MANIFEST_DIR")).join(m);
+            assert!(in_repo.is_file(), "{} is not bundled", in_repo.display());
+        }
     }
 
     #[test]

@@ -10,7 +10,7 @@ use std::io::{Read as _, Write as _};
 use std::time::{Duration, Instant};
 
 /// Reads until the reply to one command is complete (a line `OK` or `ERR ...`) or 5 s pass.
-fn reply(port: &mut dyn SerialPort, acc: &mut String) -> String {
+pub(crate) fn reply(port: &mut dyn SerialPort, acc: &mut String) -> String {
     let end = Instant::now() + Duration::from_secs(5);
     let mut buf = [0u8; 512];
     loop {
@@ -33,7 +33,7 @@ fn reply(port: &mut dyn SerialPort, acc: &mut String) -> String {
 }
 
 /// Sends a command; returns the reply without the echoed command line.
-fn ask(port: &mut dyn SerialPort, acc: &mut String, cmd: &str) -> String {
+pub(crate) fn ask(port: &mut dyn SerialPort, acc: &mut String, cmd: &str) -> String {
     port.write_all(cmd.as_bytes()).expect("write");
     port.write_all(b"\r\n").expect("write");
     let r = reply(port, acc);

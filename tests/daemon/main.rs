@@ -9,6 +9,7 @@
 mod bad_frames;
 mod cli;
 mod console_pty;
+mod console_socat;
 mod e2e;
 mod history;
 mod metrics;
