@@ -149,12 +149,17 @@ def load_renders(root, every=5, limit=0):
 
 
 def score_file(path, sets, log, tag):
-    """{set name: {"rho", "images"}} of one ONNX file on each (images, fish) set, logged on one line."""
+    """{set name: {"rho", "images"}} of one ONNX file on each (images, fish) set, logged on one line;
+    "real" pools every set but "renders" (a mean over their images: one figure for the real sources)."""
     run = onnx_runner(path)
-    out = {}
+    out, pooled = {}, [0.0, 0]
     for name, (images, fish) in sets.items():
         rho, n = score(run, images, fish)
         out[name] = {"rho": None if rho is None else round(rho, 4), "images": n}
+        if name != "renders" and n:
+            pooled[0] += rho * n
+            pooled[1] += n
+    out["real"] = {"rho": round(pooled[0] / pooled[1], 4) if pooled[1] else None, "images": pooled[1]}
     log(f"{tag}: " + ", ".join(f"{k} {fmt(v['rho'])} (n={v['images']})" for k, v in out.items()))
     return out
 

@@ -37,7 +37,7 @@ def main():
     print("held out: " + ", ".join(f"{k} {len(v[0])} images with >= {consistency.MIN_BOXES} fish inside"
                                    for k, v in sets.items()), flush=True)
     for path in args.models:
-        consistency.score_file(path, sets, lambda m: print(m, flush=True), os.path.basename(path))
+        consistency.score_file(path, sets, lambda m: print(m, flush=True), path)
 
 
 if __name__ == "__main__":
