@@ -263,3 +263,60 @@ def fast_tail(path):
     onnx.checker.check_model(m)
     onnx.save(m, path)
     return True
+
+
+def from_onnx(path):
+    """A FishDepth holding the weights of an exported fp32 file (`export`, tail rewritten by `fast_tail`
+    or not), to fine-tune the bundled network instead of training it again. The export folded each
+    BatchNorm into its convolution, so every BatchNorm becomes the identity plus that bias (eps 0:
+    exactly the exported numbers); a fine-tune keeps them frozen (`freeze_norms`)."""
+    import onnx
+    from onnx import numpy_helper
+
+    m = onnx.load(path)
+    init = {i.name: numpy_helper.to_array(i) for i in m.graph.initializer}
+    model = FishDepth()
+    mods = dict(model.named_modules())
+    done = set()
+    for n in m.graph.node:
+        if n.op_type != "Conv" or n.input[1] not in init:
+            continue
+        # Scope "/e4/e4.1/a/a.0/Conv" is module "e4.1.a.0"; its BatchNorm is the next child, "e4.1.a.1".
+        scope = n.name.strip("/").split("/")[:-1]
+        name = ".".join([scope[0]] + [p.split(".")[-1] for p in scope[1:]])
+        w = init[n.input[1]]
+        if name == "out":  # `fast_tail`'s depthwise [C,1,3,3] + channel sum + "out.bias_4d", or the plain Conv
+            bias = init[n.input[2]] if len(n.input) > 2 else init.get("out.bias_4d")
+            if bias is None:
+                raise SystemExit(f"{path}: the output convolution has no bias (not a FishDepth export?)")
+            want = tuple(model.out.weight.shape)
+            if w.size != np.prod(want):
+                raise SystemExit(f"{path}: output convolution weights {w.shape}, FishDepth has {want}")
+            model.out.weight.data.copy_(torch.from_numpy(w.reshape(want).copy()))
+            model.out.bias.data.copy_(torch.from_numpy(bias.reshape(-1).copy()))
+            done.add("out")
+            continue
+        parent, _, idx = name.rpartition(".")
+        conv_m = mods.get(name)
+        bn = mods.get(f"{parent}.{int(idx) + 1}") if idx.isdigit() else None
+        if not isinstance(conv_m, nn.Conv2d) or not isinstance(bn, nn.BatchNorm2d) or conv_m.weight.shape != w.shape:
+            raise SystemExit(f"{path}: node {n.name} (weights {w.shape}) has no matching convolution in FishDepth")
+        conv_m.weight.data.copy_(torch.from_numpy(w.copy()))
+        bn.eps = 0.0
+        bn.running_mean.zero_()
+        bn.running_var.fill_(1.0)
+        bn.weight.data.fill_(1.0)
+        bn.bias.data.copy_(torch.from_numpy(init[n.input[2]].copy()))
+        done.add(name)
+    missing = [k for k, v in mods.items() if isinstance(v, nn.Conv2d) and k not in done]
+    if missing:
+        raise SystemExit(f"{path}: no weights for {missing} (not a FishDepth export?)")
+    return model.eval()
+
+
+def freeze_norms(model):
+    """Puts every BatchNorm in eval mode: after `from_onnx` they are the folded affine layers of the
+    export, and batch statistics would re-normalise the activations the network learnt."""
+    for mod in model.modules():
+        if isinstance(mod, nn.BatchNorm2d):
+            mod.eval()
