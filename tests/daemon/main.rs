@@ -12,6 +12,7 @@ mod console_pty;
 mod e2e;
 mod history;
 mod metrics;
+mod metrics_text;
 mod modbus_client;
 mod modbus_server;
 mod support;
