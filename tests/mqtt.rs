@@ -574,7 +574,7 @@ async fn wrong_password_sets_bit_9_logs_once_backs_off_and_recovers() {
     let refused: Vec<_> = logs.iter().filter(|l| l.contains("refused the login")).collect();
     assert_eq!(refused.len(), 1, "one line, not one per attempt: {logs:?}");
     assert!(logs.iter().all(|l| !l.contains("wrong-pw-3")), "the password is never logged");
-    assert!(fme::console::mqtt_text(&m, 0).contains("link auth-failed"));
+    assert!(fme::console::mqtt_text(&m, 0).contains("link auth_failed"));
 
     // The technician fixes the password file: the next attempt logs in, bit 9 clears.
     std::fs::write(&pw, "right-pw-3\n").expect("write");

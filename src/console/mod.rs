@@ -94,55 +94,39 @@ pub struct Session {
     echo_cr: bool,
 }
 
-fn status_words(bits: u16) -> String {
-    let names = [
-        (status::RUNNING, "running"),
-        (status::CAMERA_OK, "camera-ok"),
-        (status::DETECTOR_OK, "detector-ok"),
-        (status::DEPTH_CALIBRATED, "depth-calibrated"),
-        (status::STALE, "stale"),
-        (status::PLC_LINK_OK, "plc-link-ok"),
-        (status::TOO_FEW_FISH, "too-few-fish"),
-        (status::RECORD_FAULT, "record-fault"),
-        (status::SCALE_FROM_FISH, "scale-from-fish"),
-        (status::TELEMETRY_FAULT, "telemetry-fault"),
-        (status::UNLIKE_FISH, "unlike-fish"),
-    ];
-    let v: Vec<&str> = names.iter().filter(|(b, _)| bits & b != 0).map(|(_, n)| *n).collect();
-    if v.is_empty() { "-".into() } else { v.join(" ") }
+/// Track rows the pipeline lists for `tracks` at each update, at most.
+pub const TRACK_ROWS: usize = 64;
+
+/// A decoded float32 of the block at `at`, 3 decimals, `-` when unavailable.
+fn float_at(r: &[u16; BLOCK_LEN], at: usize, order: crate::config::WordOrder, decimals: usize) -> String {
+    let v = registers::decode_f32([r[at], r[at + 1]], order);
+    if v.is_finite() { format!("{v:.decimals$}") } else { "-".into() }
 }
 
-fn fault_name(code: u16) -> &'static str {
-    match code {
-        0 => "none",
-        1 => "camera lost or stalled",
-        2 => "detector failed",
-        3 => "depth failed",
-        4 => "pipeline stalled",
-        5 => "plc link down",
-        6 => "stopped",
-        7 => "detections look unlike fish",
-        _ => "unknown",
-    }
-}
-
-/// One-line activity summary (console `activity`, `stream`, the live view).
+/// One-line activity summary (console `activity`, `stream`, the live view). Every value and flag
+/// comes from one published register block, so a value and the flags beside it are of the same
+/// update (the PLC's view); a fault ([`crate::status::is_fault_code`]) is named at the end.
 pub fn activity_line(shared: &Shared, bank: &RegisterBank) -> String {
     let r = bank.block();
-    let h = shared.health();
-    match h.last_sample {
-        Some(s) => format!(
-            "activity {:.3} m/s ({:.2} BL/s) smoothed {:.3} m/s ±{:.3} fish {} hb {} {}",
-            s.mean.get(),
-            s.mean_body_lengths,
-            s.smoothed.get(),
-            s.ci95_half.get(),
-            s.fish,
+    let order = shared.word_order();
+    let mean = registers::decode_f32([r[0], r[1]], order);
+    let mut line = if mean.is_finite() {
+        format!(
+            "activity {mean:.3} m/s ({} BL/s) smoothed {} m/s ±{} fish {} hb {} {}",
+            float_at(&r, 2, order, 2),
+            float_at(&r, 4, order, 3),
+            float_at(&r, 6, order, 3),
+            r[8],
             r[12],
-            status_words(r[10])
-        ),
-        None => format!("activity n/a hb {} {}", r[12], status_words(r[10])),
+            status::words(r[10])
+        )
+    } else {
+        format!("activity n/a fish {} hb {} {}", r[8], r[12], status::words(r[10]))
+    };
+    if crate::status::is_fault_code(r[11]) {
+        let _ = write!(line, " fault {}", crate::status::fault_name(r[11]));
     }
+    line
 }
 
 /// The console `mqtt` text: link state, broker, queue, counters, last publish (age at `now_ms`).
@@ -178,10 +162,10 @@ const HELP: &str = "commands (case-insensitive; only snap and record save write,
   help            this list
   status          running state, status bits, fault, source, uptime
   version         fme version, register-map version and inference backend
-  activity        last activity sample
-  tracks          confirmed tracks
+  activity        the last published update (one register block)
+  tracks          tracks of the last update: count and rows
   calib           metric depth fit: scale/shift, residual, visible references
-  regs            input registers 0-23 (holding registers mirror them)
+  regs            input registers 0-23: name, raw, decoded value (holding registers mirror them)
   counters        frames, drops, errors, reconnects, modbus, latency
   log [n]         last n log lines (default 10)
   history [hours] hourly activity summary of the last hours (default 24, max 168)
@@ -294,12 +278,13 @@ last {}",
                 let h = shared.health();
                 let _ = write!(
                     body,
-                    "state {}\nstatus 0x{:04x} {}\nfault {} ({})\nsource {}\nuptime {} s\nfeeding-recommended {}\ndetections {}\nhistory {}\nmetrics {}",
+                    "state {}\nstatus 0x{:04x} {}\nfault {} ({}{})\nsource {}\nuptime {} s\nfeeding-recommended {}\ndetections {}\nhistory {}\nmetrics {}",
                     if shared.stopping() { "stopping" } else { "running" },
                     r[10],
-                    status_words(r[10]),
+                    status::words(r[10]),
                     r[11],
-                    fault_name(r[11]),
+                    crate::status::fault_name(r[11]),
+                    if r[11] != 0 && !crate::status::is_fault_code(r[11]) { ", not a fault" } else { "" },
                     h.source,
                     h.started.elapsed().as_secs(),
                     r[17],
@@ -324,11 +309,17 @@ last {}",
                 Ok(())
             }
             ("tracks", None, _) => {
-                let h = shared.health();
-                let _ = write!(body, "tracks {}", h.stage.tracks);
-                if !h.tracks_text.is_empty() {
+                // The count is of the rows shown: both are of the same update (the pipeline
+                // writes the list at the output rate; its per-frame count may be newer).
+                let text = shared.health().tracks_text;
+                let rows: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+                let _ = write!(body, "tracks {}", rows.len());
+                if rows.len() >= TRACK_ROWS {
+                    let _ = write!(body, " (the first {TRACK_ROWS} listed)");
+                }
+                for l in rows {
                     body.push('\n');
-                    body.push_str(h.tracks_text.trim_end());
+                    body.push_str(l);
                 }
                 Ok(())
             }
@@ -357,9 +348,20 @@ last {}",
                 Ok(())
             }
             ("regs", None, _) => {
+                // One block, decoded by the register map the encoder follows.
                 let r = bank.block();
-                for (i, v) in r.iter().enumerate() {
-                    let _ = write!(body, "{i:2}: {v:5} 0x{v:04x}{}", if i % 4 == 3 { "\n" } else { "   " });
+                let order = shared.word_order();
+                body.push_str("reg    name                 raw            value\n");
+                for reg in &registers::MAP {
+                    let (addr, raw) = if reg.len() == 2 {
+                        (
+                            format!("{}-{}", reg.addr, reg.addr + 1),
+                            format!("0x{:04x} 0x{:04x}", r[reg.addr], r[reg.addr + 1]),
+                        )
+                    } else {
+                        (reg.addr.to_string(), format!("0x{:04x}", r[reg.addr]))
+                    };
+                    let _ = writeln!(body, "{addr:<5}  {:<20} {raw:<14} {}", reg.name, reg.decode(&r, order));
                 }
                 let w = bank.writable();
                 let _ = write!(body, "hr100-103 (plc writable): {} {} {} {}", w[0], w[1], w[2], w[3]);
@@ -730,15 +732,15 @@ record
         let mut out = String::new();
         sess.command("history 2", &s.0, &s.1, &mut out);
         let lines: Vec<&str> = out.split("\r\n").filter(|l| !l.is_empty()).collect();
-        assert_eq!(lines.len(), 4, "header, two hours, OK: {out}");
+        assert!((3..=4).contains(&lines.len()), "header, the one or two hours with rows, OK: {out}");
         assert!(lines[0].starts_with("hour (UTC)"), "{out}");
-        assert_eq!(lines[3], "OK");
-        let rows: u32 = lines[1..3]
+        assert_eq!(lines[lines.len() - 1], "OK");
+        let rows: u32 = lines[1..lines.len() - 1]
             .iter()
             .map(|l| l.split_whitespace().nth(2).and_then(|n| n.parse::<u32>().ok()).unwrap_or(0))
             .sum();
         assert_eq!(rows, 600, "{out}");
-        assert!(lines[2].contains(" 0.100 "), "{out}");
+        assert!(lines[lines.len() - 2].contains(" 0.100 "), "{out}");
         let mut out = String::new();
         sess.command("history 0", &s.0, &s.1, &mut out);
         assert!(out.starts_with("ERR usage: history"), "{out}");

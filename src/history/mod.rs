@@ -304,7 +304,7 @@ pub struct HourSummary {
     pub max_mps: f64,
     /// Time with feeding recommended, s (each row until the next, gaps over 60 s not counted).
     pub feeding_s: f64,
-    /// Rows with a fault code other than 0.
+    /// Rows with a fault ([`crate::status::is_fault_code`]: not 0 none, not 6 stopped).
     pub fault_rows: u32,
 }
 
@@ -326,7 +326,7 @@ pub fn summarize_hours(rows: &[Row], first_hour_ms: i64, hours: usize) -> Vec<Ho
         let k = (r.unix_ms - first_hour_ms).div_euclid(3_600_000);
         let Some(h) = usize::try_from(k).ok().and_then(|k| out.get_mut(k)) else { continue };
         h.rows += 1;
-        h.fault_rows += u32::from(r.fault != 0);
+        h.fault_rows += u32::from(crate::status::is_fault_code(r.fault));
         if r.activity_mps.is_finite() {
             h.valued += 1;
             h.min_mps = h.min_mps.min(r.activity_mps);
@@ -352,19 +352,23 @@ pub fn summarize_hours(rows: &[Row], first_hour_ms: i64, hours: usize) -> Vec<Ho
     out
 }
 
-/// The console's `history [hours]` text: one line per UTC hour of the last `hours` hours up to
-/// `now_ms`, read from `dir`.
+/// The console's `history [hours]` text: one line per UTC hour with rows among the last `hours`
+/// hours up to `now_ms`, read from `dir`; a box without rows in that time says so in one line.
 pub fn hourly_report(dir: &Path, now_ms: i64, hours: usize) -> Result<String, HistoryError> {
     let first = (now_ms.div_euclid(3_600_000) - hours as i64 + 1) * 3_600_000;
     let (rows, torn) = read_range(dir, first, now_ms + 1)?;
+    if rows.is_empty() {
+        return Ok(format!("no history yet: no rows in the last {hours} hours ({})\n", dir.display()));
+    }
     Ok(format_summary(&summarize_hours(&rows, first, hours), torn))
 }
 
-/// Formats hourly summaries as a table (m/s, feeding minutes).
+/// Formats hourly summaries as a table (m/s, feeding minutes); only hours with rows are listed
+/// (a box that was off, or new, has no line of zeros).
 pub fn format_summary(hours: &[HourSummary], torn: usize) -> String {
     let mut s = String::from("hour (UTC)        rows   min    mean   max  m/s  feeding-min  fault-rows\n");
     let v = |x: f64| if x.is_finite() { format!("{x:6.3}") } else { "     -".to_string() };
-    for h in hours {
+    for h in hours.iter().filter(|h| h.rows > 0) {
         let mut t = String::new();
         format_time(h.start_ms, &mut t);
         let _ = writeln!(
@@ -844,7 +848,29 @@ mod tests {
         assert!((h[2].mean_mps - 0.2).abs() < 1e-6);
         assert!((h[2].feeding_s - 1799.0).abs() < 1e-9, "{}", h[2].feeding_s);
         let text = format_summary(&h, 0);
-        assert_eq!(text.lines().count(), 4, "{text}");
-        assert!(text.lines().nth(3).is_some_and(|l| l.starts_with("2126-12-04 11:00") && l.contains("30.0")), "{text}");
+        assert_eq!(text.lines().count(), 3, "the header and the two hours with rows: {text}");
+        assert!(text.lines().nth(2).is_some_and(|l| l.starts_with("2126-12-04 11:00") && l.contains("30.0")), "{text}");
+    }
+
+    #[test]
+    fn start_up_and_clean_stop_rows_are_not_fault_rows() {
+        let base = ms(2126, 12, 4, 10);
+        let codes = [0u16, 0, 1, 4, 0, 6, 7];
+        let rows: Vec<Row> =
+            codes.iter().enumerate().map(|(i, &c)| Row { fault: c, ..row(base + i as i64 * 1000, 0.1) }).collect();
+        assert_eq!(summarize_hours(&rows, base, 1)[0].fault_rows, 3, "1, 4 and 7; not 6 (stopped)");
+    }
+
+    #[test]
+    fn a_new_box_has_no_history_yet() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let text = hourly_report(dir.path(), ms(2126, 12, 4, 10), 24).expect("an empty directory reads");
+        assert!(text.starts_with("no history yet"), "{text}");
+        assert_eq!(text.lines().count(), 1, "{text}");
+        let mut w = DayWriter::new(dir.path(), 30, 0.0);
+        w.write(&row(ms(2126, 12, 4, 9) + 5000, 0.1)).expect("write");
+        let text = hourly_report(dir.path(), ms(2126, 12, 4, 10), 24).expect("read");
+        assert_eq!(text.lines().count(), 2, "the header and the one hour with a row: {text}");
+        assert!(text.lines().nth(1).is_some_and(|l| l.starts_with("2126-12-04 09:00")), "{text}");
     }
 }

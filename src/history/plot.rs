@@ -25,6 +25,11 @@ fn runs(rows: &[Row], gap_ms: i64) -> Vec<&[Row]> {
 }
 
 /// Runs of rows where `key` gives the same `Some` value, as (first hour, last hour + one row, value).
+/// The fault a row shows in red: its code when it is a fault ([`crate::status::is_fault_code`]).
+fn fault_of(r: &Row) -> Option<u16> {
+    crate::status::is_fault_code(r.fault).then_some(r.fault)
+}
+
 fn spans(rows: &[Row], gap_ms: i64, key: impl Fn(&Row) -> Option<u16>) -> Vec<(f64, f64, u16)> {
     let mut out: Vec<(f64, f64, u16)> = Vec::new();
     let mut prev: Option<(i64, u16)> = None;
@@ -146,7 +151,7 @@ pub fn plot_day(path: &Path, title: &str, rows: &[Row]) -> Result<(), String> {
         .margin(10)
         .x_label_area_size(40)
         .y_label_area_size(70)
-        .build_cartesian_2d(0.0..24.0, -0.5..7.0)
+        .build_cartesian_2d(0.0..24.0, -0.5..8.0)
         .map_err(|x| e(&x))?;
     c.configure_mesh()
         .x_labels(25)
@@ -165,12 +170,12 @@ pub fn plot_day(path: &Path, title: &str, rows: &[Row]) -> Result<(), String> {
     .label("feeding recommended (at 0)")
     .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 20, y + 5)], green.filled()));
     c.draw_series(
-        spans(rows, gap_ms, |r| (r.fault != 0).then_some(r.fault)).into_iter().map(|(a, b, v)| {
+        spans(rows, gap_ms, fault_of).into_iter().map(|(a, b, v)| {
             Rectangle::new([(a, f64::from(v) - 0.35), (b, f64::from(v) + 0.35)], RED.mix(0.8).filled())
         }),
     )
     .map_err(|x| e(&x))?
-    .label("fault code (1 camera, 2 detector, 3 depth, 4 stalled, 5 PLC link, 6 stopped)")
+    .label("fault code (1 camera, 2 detector, 3 depth, 4 stalled, 5 PLC link, 7 unlike fish)")
     .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 20, y + 5)], RED.filled()));
     c.configure_series_labels()
         .background_style(WHITE.mix(0.8))
@@ -213,5 +218,12 @@ mod tests {
         // Spans stop at the gap; a short span is widened to one minute so that it shows.
         assert!((s[0].0 - hour(1000)).abs() < 1e-12 && (s[0].1 - (hour(1000) + 1.0 / 60.0)).abs() < 1e-12);
         assert!((s[1].0 - hour(100_000)).abs() < 1e-12, "{s:?}");
+    }
+
+    #[test]
+    fn a_clean_stop_draws_no_fault() {
+        let rows = [r(0, 0, false), r(1, 6, false), r(2, 1, false)];
+        let s = spans(&rows, 10_000, fault_of);
+        assert_eq!(s.iter().map(|x| x.2).collect::<Vec<_>>(), [1], "code 6 (stopped) is no fault: {s:?}");
     }
 }

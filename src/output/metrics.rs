@@ -47,24 +47,19 @@ pub const WRITE_TIMEOUT: Duration = Duration::from_secs(5);
 /// The content type of the exposition.
 pub const CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
 
-/// Upper bounds of the frame-to-register latency histogram's buckets, s (`+Inf` follows). The health
-/// histogram has 1 ms resolution up to 1 s, so each bound counts the samples below it.
-pub const LATENCY_BOUNDS_S: [f64; 9] = [0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 0.75, 1.0];
-
-/// The status bits of register 10 by name (the console's words), exported as `fme_status_bit`.
-pub const STATUS_BITS: &[(u16, &str)] = &[
-    (status::RUNNING, "running"),
-    (status::CAMERA_OK, "camera-ok"),
-    (status::DETECTOR_OK, "detector-ok"),
-    (status::DEPTH_CALIBRATED, "depth-calibrated"),
-    (status::STALE, "stale"),
-    (status::PLC_LINK_OK, "plc-link-ok"),
-    (status::TOO_FEW_FISH, "too-few-fish"),
-    (status::RECORD_FAULT, "record-fault"),
-    (status::SCALE_FROM_FISH, "scale-from-fish"),
-    (status::TELEMETRY_FAULT, "telemetry-fault"),
-    (status::UNLIKE_FISH, "unlike-fish"),
+/// Upper bounds of the frame-to-register latency histogram's buckets, s (`+Inf` follows). Whole
+/// milliseconds (the health histogram's resolution, so each bound counts the samples below it),
+/// each at most 1.2 x the one before from 5 ms to 1 s: a p99 that `histogram_quantile` interpolates
+/// in a bucket is then within 20 % of the console's `latency-p99` for any p99 from 5 ms to 1 s.
+pub const LATENCY_BOUNDS_S: [f64; 37] = [
+    0.005, 0.006, 0.007, 0.008, 0.009, 0.010, 0.012, 0.014, 0.016, 0.019, 0.022, 0.026, 0.030, 0.035, 0.040, 0.045,
+    0.050, 0.060, 0.070, 0.080, 0.090, 0.100, 0.120, 0.140, 0.160, 0.190, 0.225, 0.270, 0.320, 0.380, 0.450, 0.500,
+    0.600, 0.700, 0.800, 0.900, 1.0,
 ];
+
+/// The status bits of register 10 by name, exported as `fme_status_bit{name}`: the names of the MQTT
+/// `activity` JSON (one table, [`status::NAMES`]).
+pub const STATUS_BITS: [(&str, u16); 11] = status::NAMES;
 
 // ---------------------------------------------------------------------------------------------
 // The text format.
@@ -353,17 +348,21 @@ pub fn families(s: &Snapshot, e: &mut Exposition) {
     // What the PLC reads in registers 10, 11 and 17.
     let word = s.block[10];
     e.gauge("fme_status_word", "Status bits as register 10 holds them (docs/plc-integration.md).", f64::from(word));
-    let bits: Vec<(&str, f64)> = STATUS_BITS.iter().map(|&(bit, name)| (name, b(word & bit != 0))).collect();
+    let bits: Vec<(&str, f64)> = STATUS_BITS.iter().map(|&(name, bit)| (name, b(word & bit != 0))).collect();
     e.gauge_by("fme_status_bit", "Each status bit of register 10 by name (0/1).", "name", &bits);
     e.gauge(
         "fme_fault_code",
-        "Fault code of register 11: 0 none, 1 camera, 2 detector, 3 depth, 4 pipeline stalled, 5 PLC link, 6 stopped.",
+        "Fault code of register 11: 0 none, 1 camera, 2 detector, 3 depth, 4 pipeline stalled, 5 PLC link, 6 stopped, 7 unlike fish.",
         f64::from(s.block[11]),
+    );
+    e.gauge(
+        "fme_fault_active",
+        "Register 11 holds a fault (0/1): codes 1-5 and 7; 0 none and 6 stopped are not (as history, console and MQTT count them).",
+        b(crate::status::is_fault_code(s.block[11])),
     );
     e.gauge("fme_feeding_recommended", "Feeding recommended (register 17, 0/1).", f64::from(s.block[17]));
 
-    // Camera and pipeline.
-    e.gauge("fme_camera_frames_per_second", "Camera frame rate over the last second, frames/s.", h.camera_fps);
+    // Camera and pipeline: rates are counters (the frame rate is rate(fme_frames_captured_total)).
     e.counter("fme_frames_captured_total", "Frames captured.", h.frames_captured);
     e.counter("fme_frames_processed_total", "Frames processed by the pipeline.", h.frames_processed);
     e.counter(
@@ -379,8 +378,8 @@ pub fn families(s: &Snapshot, e: &mut Exposition) {
     e.counter("fme_camera_reconnects_total", "Camera reconnects.", h.reconnects);
     e.counter("fme_pipeline_errors_total", "Pipeline errors (bad frames, stage failures).", h.pipeline_errors);
     e.counter("fme_updates_total", "Register updates published.", h.updates);
-    e.gauge("fme_detector_runs_per_second", "Detector runs per second achieved.", h.stage.detector_hz);
-    e.gauge("fme_depth_runs_per_second", "Depth network runs per second achieved.", h.stage.depth_hz);
+    e.counter("fme_detector_runs_total", "Detector runs (rate() of it: runs per second).", h.stage.detector_runs);
+    e.counter("fme_depth_runs_total", "Depth network runs (rate() of it: runs per second).", h.stage.depth_runs);
     e.gauge(
         "fme_calibration_residual_meters",
         "RMS residual of the metric depth fit on the reference objects (paper eq. 1-2), m; NaN when uncalibrated.",
@@ -964,9 +963,9 @@ mod tests {
         assert_eq!(value(&t, "fme_fish"), "17");
         assert_eq!(value(&t, "fme_activity_mean_meters_per_second"), "0.25");
         assert_eq!(value(&t, "fme_frames_captured_total"), "120");
-        assert_eq!(value(&t, "fme_status_bit{name=\"camera-ok\"}"), "1");
+        assert_eq!(value(&t, "fme_status_bit{name=\"camera_ok\"}"), "1");
         assert_eq!(value(&t, "fme_status_bit{name=\"stale\"}"), "1");
-        assert_eq!(value(&t, "fme_status_bit{name=\"detector-ok\"}"), "0");
+        assert_eq!(value(&t, "fme_status_bit{name=\"detector_ok\"}"), "0");
         assert_eq!(value(&t, "fme_status_word"), "19");
         assert_eq!(value(&t, "fme_fault_code"), "3");
         assert_eq!(value(&t, "fme_feeding_recommended"), "1");

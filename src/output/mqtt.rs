@@ -33,20 +33,9 @@ use std::time::{Duration, Instant};
 use tracing::Level;
 
 /// Names of the status bits of input register 10 as they appear in the `activity` JSON
-/// (`status` object), in bit order.
-pub const STATUS_BIT_NAMES: [(&str, u16); 11] = [
-    ("running", status::RUNNING),
-    ("camera_ok", status::CAMERA_OK),
-    ("detector_ok", status::DETECTOR_OK),
-    ("depth_calibrated", status::DEPTH_CALIBRATED),
-    ("stale", status::STALE),
-    ("plc_link_ok", status::PLC_LINK_OK),
-    ("too_few_fish", status::TOO_FEW_FISH),
-    ("record_fault", status::RECORD_FAULT),
-    ("scale_from_fish", status::SCALE_FROM_FISH),
-    ("telemetry_fault", status::TELEMETRY_FAULT),
-    ("unlike_fish", status::UNLIKE_FISH),
-];
+/// (`status` object), in bit order: the one table ([`status::NAMES`]) the metrics and the console
+/// use too.
+pub const STATUS_BIT_NAMES: [(&str, u16); 11] = status::NAMES;
 
 /// Payload of the retained `status` topic while connected.
 pub const ONLINE: &str = "online";
@@ -60,19 +49,9 @@ const LOG_EVERY: Duration = Duration::from_secs(60);
 /// After a stop request, time left to deliver the queue before saying "offline".
 const STOP_FLUSH: Duration = Duration::from_millis(400);
 
-/// Name of a fault code (register 11) in the JSON.
+/// Name of a fault code (register 11) in the JSON ([`crate::status::fault_name`]).
 pub fn fault_name(code: u16) -> &'static str {
-    match code {
-        0 => "none",
-        1 => "camera",
-        2 => "detector",
-        3 => "depth",
-        4 => "pipeline_stalled",
-        5 => "plc_link",
-        6 => "stopped",
-        7 => "unlike_fish",
-        _ => "unknown",
-    }
+    crate::status::fault_name(code)
 }
 
 /// The host name: `/proc/sys/kernel/hostname`, else `gethostname(2)`, else `"fme"`.
@@ -180,6 +159,8 @@ impl EventTracker {
         if row.fault == crate::status::FaultCode::Stopped as u16 {
             return out;
         }
+        // Only faults raise and clear ([`crate::status::is_fault_code`], as the history counts them).
+        let code = if crate::status::is_fault_code(row.fault) { row.fault } else { 0 };
         let (feeding, fault) = match self.last {
             Some((f, c, s)) => {
                 if scale != s && scale != ScaleSource::None && s != ScaleSource::None {
@@ -189,12 +170,12 @@ impl EventTracker {
             }
             None => (false, 0),
         };
-        if row.fault != fault {
+        if code != fault {
             if fault != 0 {
                 let _ = out.push(EventKind::FaultCleared(fault));
             }
-            if row.fault != 0 {
-                let _ = out.push(EventKind::FaultRaised(row.fault));
+            if code != 0 {
+                let _ = out.push(EventKind::FaultRaised(code));
             }
         }
         let unlike = row.status & status::UNLIKE_FISH != 0;
@@ -210,7 +191,7 @@ impl EventTracker {
             (Some((_, _, s)), ScaleSource::None) => s,
             _ => scale,
         };
-        self.last = Some((row.feeding, row.fault, kept));
+        self.last = Some((row.feeding, code, kept));
         out
     }
 }

@@ -71,7 +71,126 @@ pub mod status {
     /// (`[familiarity]`, docs/pipeline.md). The value is not to be trusted; the feeding rule does
     /// not act on it (feeding recommended is off).
     pub const UNLIKE_FISH: u16 = 1 << 10;
+
+    /// Every bit by name, in bit order: the one spelling the MQTT `activity` JSON, the metrics
+    /// (`fme_status_bit{name}`) and the console use.
+    pub const NAMES: [(&str, u16); 11] = [
+        ("running", RUNNING),
+        ("camera_ok", CAMERA_OK),
+        ("detector_ok", DETECTOR_OK),
+        ("depth_calibrated", DEPTH_CALIBRATED),
+        ("stale", STALE),
+        ("plc_link_ok", PLC_LINK_OK),
+        ("too_few_fish", TOO_FEW_FISH),
+        ("record_fault", RECORD_FAULT),
+        ("scale_from_fish", SCALE_FROM_FISH),
+        ("telemetry_fault", TELEMETRY_FAULT),
+        ("unlike_fish", UNLIKE_FISH),
+    ];
+
+    /// The names of the bits set in `bits`, space separated (`-` when none is).
+    pub fn words(bits: u16) -> String {
+        let v: Vec<&str> = NAMES.iter().filter(|(_, b)| bits & b != 0).map(|(n, _)| *n).collect();
+        if v.is_empty() { "-".into() } else { v.join(" ") }
+    }
 }
+
+/// How a register's raw word(s) read ([`MAP`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Encoding {
+    /// IEEE-754 float32 over two registers (`output.modbus.word_order`); NaN = unavailable.
+    F32,
+    /// uint32 over two registers (`output.modbus.word_order`).
+    U32,
+    /// uint16.
+    U16,
+    /// uint16, the value x10.
+    Tenths,
+    /// uint16, the value x1000 (m/s as mm/s); 65535 = unavailable.
+    Thousandths,
+    /// uint16, the age x10 in s; 65534 = no value yet.
+    Age,
+    /// The status bits ([`status`]).
+    Bits,
+    /// The fault code ([`FaultCode`]).
+    Fault,
+    /// 0/1.
+    Flag,
+}
+
+/// One entry of the register map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Register {
+    /// First register (0-based PDU address).
+    pub addr: usize,
+    /// Name (the console `regs`).
+    pub name: &'static str,
+    /// How the word(s) read.
+    pub encoding: Encoding,
+    /// Unit of the decoded value (empty: a count or a code).
+    pub unit: &'static str,
+}
+
+impl Register {
+    /// Registers it spans (2 for float32 and uint32).
+    pub const fn len(&self) -> usize {
+        match self.encoding {
+            Encoding::F32 | Encoding::U32 => 2,
+            _ => 1,
+        }
+    }
+
+    /// Never empty: every entry spans at least one register.
+    pub const fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// The decoded value with its unit, from `block` encoded in word order `order`.
+    pub fn decode(&self, block: &[u16; BLOCK_LEN], order: WordOrder) -> String {
+        let w = block[self.addr];
+        let unit = |v: String| if self.unit.is_empty() { v } else { format!("{v} {}", self.unit) };
+        match self.encoding {
+            Encoding::F32 => {
+                let v = decode_f32([w, block[self.addr + 1]], order);
+                if v.is_finite() { unit(format!("{v:.4}")) } else { "n/a".into() }
+            }
+            Encoding::U32 => unit(join_u32([w, block[self.addr + 1]], order).to_string()),
+            Encoding::U16 => unit(w.to_string()),
+            Encoding::Tenths => unit(format!("{:.1}", f64::from(w) / 10.0)),
+            Encoding::Thousandths if w == u16::MAX => "n/a".into(),
+            Encoding::Thousandths => unit(format!("{:.3}", f64::from(w) / 1000.0)),
+            Encoding::Age if w >= u16::MAX - 1 => "no value yet".into(),
+            Encoding::Age => unit(format!("{:.1}", f64::from(w) / 10.0)),
+            Encoding::Bits => status::words(w),
+            Encoding::Fault => crate::status::fault_name(w).to_string(),
+            Encoding::Flag => (if w == 0 { "no" } else { "yes" }).to_string(),
+        }
+    }
+}
+
+/// The register block, register by register: the one map the encoder ([`encode`]), the console
+/// `regs` and docs/plc-integration.md follow.
+pub const MAP: [Register; 19] = [
+    Register { addr: 0, name: "activity_mean", encoding: Encoding::F32, unit: "m/s" },
+    Register { addr: 2, name: "activity_mean_bls", encoding: Encoding::F32, unit: "BL/s" },
+    Register { addr: 4, name: "activity_smoothed", encoding: Encoding::F32, unit: "m/s" },
+    Register { addr: 6, name: "ci95_half_width", encoding: Encoding::F32, unit: "m/s" },
+    Register { addr: 8, name: "fish", encoding: Encoding::U16, unit: "" },
+    Register { addr: 9, name: "activity_mean_mm", encoding: Encoding::Thousandths, unit: "m/s" },
+    Register { addr: 10, name: "status", encoding: Encoding::Bits, unit: "" },
+    Register { addr: 11, name: "fault", encoding: Encoding::Fault, unit: "" },
+    Register { addr: 12, name: "heartbeat", encoding: Encoding::U16, unit: "" },
+    Register { addr: 13, name: "uptime", encoding: Encoding::U32, unit: "s" },
+    Register { addr: 15, name: "camera_fps", encoding: Encoding::Tenths, unit: "frames/s" },
+    Register { addr: 16, name: "dropped_frames", encoding: Encoding::U16, unit: "" },
+    Register { addr: 17, name: "feeding_recommended", encoding: Encoding::Flag, unit: "" },
+    Register { addr: 18, name: "version_major", encoding: Encoding::U16, unit: "" },
+    Register { addr: 19, name: "version_minor", encoding: Encoding::U16, unit: "" },
+    Register { addr: 20, name: "detector_rate", encoding: Encoding::Tenths, unit: "runs/s" },
+    Register { addr: 21, name: "depth_rate", encoding: Encoding::Tenths, unit: "runs/s" },
+    Register { addr: 22, name: "value_age", encoding: Encoding::Age, unit: "s" },
+    Register { addr: 23, name: "feeding_ack", encoding: Encoding::U16, unit: "" },
+];
 
 pub use crate::status::FaultCode;
 
@@ -244,5 +363,41 @@ mod tests {
         assert_eq!(r[22], u16::MAX - 1);
         let big = RegisterInputs { mean_mps: 1000.0, ..Default::default() };
         assert_eq!(encode(&big, WordOrder::HighFirst)[9], 65534);
+    }
+
+    #[test]
+    fn the_map_covers_the_block_and_decodes_what_encode_wrote() {
+        let mut next = 0;
+        for r in &MAP {
+            assert_eq!(r.addr, next, "{} starts where the previous entry ends", r.name);
+            next += r.len();
+        }
+        assert_eq!(next, BLOCK_LEN);
+        let inp = RegisterInputs {
+            mean_mps: 0.2345,
+            mean_bls: f64::NAN,
+            fish: 17,
+            status: status::RUNNING | status::TOO_FEW_FISH,
+            fault: FaultCode::Camera,
+            uptime_s: 70_000,
+            camera_fps: 29.97,
+            feeding: true,
+            value_age_s: 0.42,
+            ..Default::default()
+        };
+        for order in [WordOrder::HighFirst, WordOrder::LowFirst] {
+            let block = encode(&inp, order);
+            let v = |name: &str| MAP.iter().find(|r| r.name == name).expect(name).decode(&block, order);
+            assert_eq!(v("activity_mean"), "0.2345 m/s");
+            assert_eq!(v("activity_mean_bls"), "n/a");
+            assert_eq!(v("fish"), "17");
+            assert_eq!(v("activity_mean_mm"), "0.235 m/s");
+            assert_eq!(v("status"), "running too_few_fish");
+            assert_eq!(v("fault"), "camera");
+            assert_eq!(v("uptime"), "70000 s");
+            assert_eq!(v("camera_fps"), "30.0 frames/s");
+            assert_eq!(v("feeding_recommended"), "yes");
+            assert_eq!(v("value_age"), "0.4 s");
+        }
     }
 }

@@ -450,6 +450,7 @@ impl FishPipeline {
         }
         self.health.detector_ok = true;
         self.det_rate.record(t.0);
+        self.health.detector_runs += 1;
         let matched = self
             .tracker
             .update(t, &self.dets)
@@ -476,6 +477,7 @@ impl FishPipeline {
         }
         self.health.depth_ok = true;
         self.depth_rate.record(frame.timestamp.0);
+        self.health.depth_runs += 1;
         self.refit(frame.timestamp.0);
         Ok(())
     }

@@ -75,6 +75,10 @@ pub struct StageHealth {
     pub detector_hz: f64,
     /// Depth runs per second achieved.
     pub depth_hz: f64,
+    /// Detector runs since start (the metrics' counter; `rate()` of it is `detector_hz`).
+    pub detector_runs: u64,
+    /// Depth network runs since start.
+    pub depth_runs: u64,
     /// Tracks currently confirmed.
     pub tracks: u32,
     /// The familiarity monitor's state ("detections look unlike fish", `[familiarity]`).

@@ -402,7 +402,7 @@ fn pipeline_loop(mut c: PipelineCtx) {
         }
         if due {
             tracks.clear();
-            let _ = c.pipeline.describe_tracks(&mut tracks, 64);
+            let _ = c.pipeline.describe_tracks(&mut tracks, crate::console::TRACK_ROWS);
         }
         c.shared.with_health(|h| {
             h.frames_processed = processed;
@@ -459,6 +459,7 @@ impl Daemon {
         let bank = Arc::new(RegisterBank::new());
         let shared = Arc::new(Shared::new(config_text, cfg.console.log_lines));
         shared.with_health(|h| h.source = source.describe());
+        shared.set_word_order(cfg.output.modbus.word_order);
         shared.log(
             Level::INFO,
             format!(

@@ -77,9 +77,13 @@ impl Publisher {
         let age = h.last_sample_at.map(|t| now.saturating_duration_since(t));
         let stale = age.is_none_or(|a| a > self.stale_after);
         let sample = h.last_sample.filter(|_| !stale);
+        // No frame finished yet counts from the start: the first frames are not a stall.
         let stalled =
-            h.camera_ok && h.last_processed_at.is_none_or(|t| now.saturating_duration_since(t) > self.stall_after);
+            h.camera_ok && now.saturating_duration_since(h.last_processed_at.unwrap_or(h.started)) > self.stall_after;
         let uptime = now.saturating_duration_since(h.started);
+        // Start-up is no fault: until the camera's first frame or first error, for at most
+        // `service.stall_after_s`, the camera is "not yet", not "lost" (bit 1 stays clear).
+        let starting = h.frames_captured == 0 && h.capture_errors == 0 && uptime <= self.stall_after;
         // A value whose detections look unlike fish is no usable value for the feeding rule.
         let unlike_fish = h.last_sample.is_some_and(|s| s.flags.unlike_fish);
         let smoothed = sample.filter(|s| !s.flags.unlike_fish).map(|s| s.smoothed.get());
@@ -121,7 +125,7 @@ impl Publisher {
         let client = matches!(self.mode, ModbusMode::TcpClient | ModbusMode::RtuClient);
         let fault = if stopped {
             FaultCode::Stopped
-        } else if !h.camera_ok {
+        } else if !h.camera_ok && !starting {
             FaultCode::Camera
         } else if stalled {
             FaultCode::PipelineStalled
@@ -272,5 +276,30 @@ mod tests {
         let inp = p.inputs(&flagged, true, 0, t0 + Duration::from_secs(10_000), false);
         assert_eq!(inp.fault, FaultCode::Camera);
         assert_ne!(inp.status & status::UNLIKE_FISH, 0);
+    }
+
+    #[test]
+    fn start_up_is_no_fault_until_the_camera_fails_or_stays_silent() {
+        let cfg = Config::default();
+        let timing = super::super::timing::Timing::from_config(&cfg).expect("default timing");
+        let mut p = Publisher::new(&cfg, &timing, Arc::new(RegisterBank::new()));
+        let t0 = Instant::now();
+        let mut h = Shared::new(String::new(), 4).health();
+        h.started = t0;
+        // The first block, before the capture thread has a frame: no fault, camera bit clear.
+        let inp = p.inputs(&h, true, 0, t0, false);
+        assert_eq!(inp.fault, FaultCode::None);
+        assert_eq!(inp.status & status::CAMERA_OK, 0);
+        // First frame captured, none processed yet: not a stall.
+        h.camera_ok = true;
+        h.frames_captured = 1;
+        assert_eq!(p.inputs(&h, true, 0, t0 + Duration::from_millis(50), false).fault, FaultCode::None);
+        // A camera silent past service.stall_after_s, or one that failed, is a camera fault.
+        let mut silent = Shared::new(String::new(), 4).health();
+        silent.started = t0;
+        let late = t0 + timing.stall_after + Duration::from_secs(1);
+        assert_eq!(p.inputs(&silent, true, 0, late, false).fault, FaultCode::Camera);
+        silent.capture_errors = 1;
+        assert_eq!(p.inputs(&silent, true, 0, t0, false).fault, FaultCode::Camera);
     }
 }

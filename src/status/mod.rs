@@ -165,13 +165,13 @@ pub enum MqttLink {
 }
 
 impl MqttLink {
-    /// Name shown on the console and in the metrics.
+    /// Name shown on the console and in the metrics (spelled as MQTT spells its names).
     pub fn name(self) -> &'static str {
         match self {
             Self::Disabled => "disabled",
             Self::Connecting => "connecting",
             Self::Connected => "connected",
-            Self::AuthFailed => "auth-failed",
+            Self::AuthFailed => "auth_failed",
         }
     }
 }
@@ -349,6 +349,9 @@ pub struct Shared {
     pub history: HistoryStatus,
     /// The Prometheus endpoint's state and counters.
     pub metrics: MetricsStatus,
+    /// Word order of the published register block (`output.modbus.word_order`), set once at start:
+    /// the console decodes the block with it.
+    word_order: OnceLock<crate::config::WordOrder>,
 }
 
 impl Shared {
@@ -363,7 +366,18 @@ impl Shared {
             stopping: AtomicBool::new(false),
             history: HistoryStatus::default(),
             metrics: MetricsStatus::default(),
+            word_order: OnceLock::new(),
         }
+    }
+
+    /// Records the word order the register block is encoded with (the first call wins).
+    pub fn set_word_order(&self, order: crate::config::WordOrder) {
+        let _ = self.word_order.set(order);
+    }
+
+    /// The word order of the register block (the default, high word first, until set).
+    pub fn word_order(&self) -> crate::config::WordOrder {
+        self.word_order.get().copied().unwrap_or_default()
     }
 
     /// Runs `f` on the health snapshot under its lock (keep `f` short).
@@ -433,6 +447,58 @@ pub enum FaultCode {
     UnlikeFish = 7,
 }
 
+impl FaultCode {
+    /// Every code, in code order.
+    pub const ALL: [Self; 8] = [
+        Self::None,
+        Self::Camera,
+        Self::Detector,
+        Self::Depth,
+        Self::PipelineStalled,
+        Self::PlcLink,
+        Self::Stopped,
+        Self::UnlikeFish,
+    ];
+
+    /// The code of register 11 value `code`; `None` for a code this version does not know.
+    pub fn from_code(code: u16) -> Option<Self> {
+        Self::ALL.iter().copied().find(|c| *c as u16 == code)
+    }
+
+    /// Whether this code is a fault: the one definition the history summaries (console `history`,
+    /// `fme report` and its plot), the console and the MQTT events use. 0 (none) and 6 (stopped:
+    /// an orderly stop, the final write before exit) are states, not faults.
+    pub const fn is_fault(self) -> bool {
+        !matches!(self, Self::None | Self::Stopped)
+    }
+
+    /// The name of the code as MQTT and the metrics spell it (`camera`, `pipeline_stalled`, ...).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Camera => "camera",
+            Self::Detector => "detector",
+            Self::Depth => "depth",
+            Self::PipelineStalled => "pipeline_stalled",
+            Self::PlcLink => "plc_link",
+            Self::Stopped => "stopped",
+            Self::UnlikeFish => "unlike_fish",
+        }
+    }
+}
+
+/// Whether register 11 value `code` is a fault ([`FaultCode::is_fault`]); a code this version does
+/// not know counts as one (written by a newer version: better shown than hidden).
+pub fn is_fault_code(code: u16) -> bool {
+    FaultCode::from_code(code).is_none_or(FaultCode::is_fault)
+}
+
+/// Name of register 11 value `code` ([`FaultCode::name`]; `unknown` for a code this version does
+/// not know).
+pub fn fault_name(code: u16) -> &'static str {
+    FaultCode::from_code(code).map_or("unknown", FaultCode::name)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -462,6 +528,14 @@ mod tests {
         assert_eq!(h.count_below_ms(5), 2, "below 5 ms: 0.2 and 4.9");
         assert_eq!(h.count_below_ms(1000), 4);
         assert_eq!(h.count_below_ms(u32::MAX), 4, "the overflow bucket (1000 ms, NaN) is never below a bound");
+    }
+
+    #[test]
+    fn start_up_and_stop_are_not_faults() {
+        let faults: Vec<u16> = (0..10).filter(|&c| is_fault_code(c)).collect();
+        assert_eq!(faults, [1, 2, 3, 4, 5, 7, 8, 9], "0 none and 6 stopped are no faults; unknown codes are");
+        assert_eq!(fault_name(4), "pipeline_stalled");
+        assert_eq!(fault_name(99), "unknown");
     }
 
     #[test]

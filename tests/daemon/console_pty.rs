@@ -76,11 +76,11 @@ async fn console_commands_and_fuzz() {
         let v = ask(port, &mut acc, "VERSION");
         assert!(v.contains(env!("CARGO_PKG_VERSION")) && v.ends_with("OK\r\n"), "{v:?}");
         let s = ask(port, &mut acc, "status");
-        assert!(s.contains("state running") && s.contains("camera-ok"), "{s:?}");
+        assert!(s.contains("state running") && s.contains("camera_ok"), "{s:?}");
         let a = ask(port, &mut acc, "Activity");
         assert!(a.starts_with("activity ") && a.contains(" m/s"), "{a:?}");
         let r = ask(port, &mut acc, "regs");
-        assert!(r.contains("12: ") && r.contains("hr100-103"), "{r:?}");
+        assert!(r.contains("heartbeat") && r.contains("hr100-103"), "{r:?}");
         let c = ask(port, &mut acc, "counters");
         assert!(c.contains("frames-processed") && c.contains("latency-p99"), "{c:?}");
         let l = ask(port, &mut acc, "log 3");
@@ -142,6 +142,86 @@ async fn console_commands_and_fuzz() {
     if let Err(e) = result {
         std::panic::resume_unwind(e.into_panic());
     }
+}
+
+/// What the technician sees comes from one update: the live view's values and flags from one
+/// published block (not a newer frame's count beside the block's flags), the `tracks` count from the
+/// rows it lists, `history` on a new box says there is none, `regs` decodes each register.
+#[test]
+fn each_view_shows_one_update_and_regs_are_decoded() {
+    use fme::output::registers::{self, RegisterInputs, status};
+    let (mut master, slave) = serialport::TTYPort::pair().expect("pty pair");
+    master.set_timeout(Duration::from_millis(100)).expect("timeout");
+    let shared = std::sync::Arc::new(fme::status::Shared::new(String::new(), 50));
+    let bank = std::sync::Arc::new(fme::output::bank::RegisterBank::new());
+    // The published update: 5 fish, too few of them, heartbeat 7.
+    let published = RegisterInputs {
+        mean_mps: 0.2,
+        mean_bls: 0.8,
+        smoothed_mps: 0.19,
+        ci95_half_mps: 0.02,
+        fish: 5,
+        status: status::RUNNING | status::CAMERA_OK | status::TOO_FEW_FISH,
+        heartbeat: 7,
+        ..RegisterInputs::default()
+    };
+    bank.publish(registers::encode(&published, fme::config::WordOrder::HighFirst));
+    // A newer frame the block does not hold yet (18 fish, no flag), and the track list of the last
+    // update (3 rows) beside a per-frame count of 23.
+    shared.with_health(|h| {
+        h.last_sample = Some(fme::pipeline::ActivitySample {
+            timestamp: fme::units::Seconds(9.0),
+            mean: fme::units::MetresPerSecond(0.31),
+            mean_body_lengths: 1.2,
+            smoothed: fme::units::MetresPerSecond(0.3),
+            ci95_half: fme::units::MetresPerSecond(0.01),
+            fish: 18,
+            latency: fme::units::Seconds(0.0),
+            flags: fme::pipeline::QualityFlags::default(),
+            scale: fme::pipeline::ScaleSource::References,
+        });
+        h.last_sample_at = Some(Instant::now());
+        h.stage.tracks = 23;
+        h.tracks_text = (1..=3).map(|i| format!("id {i:>4} t 8.90 s box (10,10) 5x3 px depth - speed -\n")).collect();
+    });
+    let hist = tempfile::tempdir().expect("tempdir");
+    shared.history.set_dir(hist.path());
+    let name = slave.name().expect("pty name");
+    let (sh, bk) = (shared.clone(), bank.clone());
+    let console = std::thread::spawn(move || fme::console::run_on_device(&name, 115_200, true, &sh, &bk));
+
+    let port: &mut dyn SerialPort = &mut master;
+    let mut acc = String::new();
+    let end = Instant::now() + Duration::from_secs(5);
+    let mut buf = [0u8; 256];
+    while !acc.contains("console ready") {
+        assert!(Instant::now() < end, "no greeting: {acc:?}");
+        if let Ok(n) = port.read(&mut buf) {
+            acc.push_str(&String::from_utf8_lossy(&buf[..n]));
+        }
+    }
+    acc.clear();
+    let a = ask(port, &mut acc, "activity");
+    assert!(a.contains("fish 5 ") && a.contains("too_few_fish") && a.contains("activity 0.200 m/s"), "{a:?}");
+    assert!(!a.contains("fish 18") && !a.contains(" fault "), "{a:?}");
+    let t = ask(port, &mut acc, "tracks");
+    let lines: Vec<&str> = t.lines().filter(|l| !l.is_empty() && *l != "OK").collect();
+    assert_eq!(lines[0], "tracks 3", "{t:?}");
+    assert_eq!(lines.len(), 4, "the count and its rows: {t:?}");
+    let h = ask(port, &mut acc, "history");
+    assert!(h.starts_with("no history yet"), "{h:?}");
+    assert_eq!(h.lines().count(), 2, "one line and OK, no hours of zeros: {h:?}");
+    let r = ask(port, &mut acc, "regs");
+    let row =
+        |name: &str| r.lines().find(|l| l.split_whitespace().nth(1) == Some(name)).unwrap_or_default().to_string();
+    assert!(row("activity_mean").contains("0x3e4c 0xcccd") && row("activity_mean").ends_with("0.2000 m/s"), "{r}");
+    assert!(row("fish").contains("0x0005") && row("fish").ends_with(" 5"), "{r}");
+    assert!(row("status").ends_with("running camera_ok too_few_fish"), "{r}");
+    assert!(row("fault").ends_with("none") && row("heartbeat").ends_with(" 7"), "{r}");
+    assert!(row("value_age").ends_with("0.0 s"), "{r}");
+    shared.request_stop();
+    console.join().expect("the console thread ends");
+    drop(slave);
 }
 
 /// A terminal that stops reading (a stalled socat relay, a frozen screen) must not stall the

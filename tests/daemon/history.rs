@@ -103,6 +103,63 @@ async fn unwritable_history_dir_pauses_history_and_registers_keep_updating() {
     daemon.shutdown().await;
 }
 
+/// A clean start and an orderly stop are no faults, and the history summary (console `history`,
+/// `fme report`), the console and the MQTT events agree on it: one definition.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_clean_start_and_stop_are_no_faults_anywhere() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    support::write_sequence(&dir.path().join("seq"), 40, 160, 96, 30);
+    let mut cfg = support::test_config(&dir.path().join("seq"));
+    let hist = dir.path().join("history");
+    cfg.history.dir = hist.clone();
+    cfg.history.fsync_s = 0.0;
+    let source: Box<dyn FrameSource> =
+        Box::new(RecordedSource::open(&dir.path().join("seq"), true, true).expect("open"));
+    let pipeline = support::edge_pipeline(&cfg);
+    let daemon = Daemon::start(cfg, String::new(), source, pipeline, RunOptions::default()).await.expect("start");
+    let shared = daemon.shared().clone();
+    let bank = daemon.bank().clone();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while shared.history.written.load(std::sync::atomic::Ordering::Relaxed) < 5 && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    daemon.shutdown().await;
+    let mut rows: Vec<Row> = Vec::new();
+    for e in std::fs::read_dir(&hist).expect("history dir").flatten() {
+        rows.extend(history::read_day_file(&e.path()).unwrap_or_else(|err| panic!("{err}")).rows);
+    }
+    rows.sort_by_key(|r| r.unix_ms);
+    assert!(rows.len() >= 6, "{} rows", rows.len());
+    assert_eq!(rows[0].fault, 0, "the first block, before the camera's first frame, is no camera fault");
+    let last = rows[rows.len() - 1];
+    assert_eq!(last.fault, 6, "the clean stop is the last row (fault code 6, stopped)");
+    assert_eq!(last.status & fme::output::registers::status::RUNNING, 0);
+    let codes: Vec<u16> = rows.iter().map(|r| r.fault).collect();
+    assert!(rows.iter().all(|r| !fme::status::is_fault_code(r.fault)), "no fault: {codes:?}");
+    // The history summary (console `history`, `fme report`): no fault rows.
+    let first_hour = rows[0].unix_ms.div_euclid(3_600_000) * 3_600_000;
+    let hours = history::summarize_hours(&rows, first_hour, 2);
+    assert_eq!(hours.iter().map(|h| h.fault_rows).sum::<u32>(), 0, "{hours:?}");
+    // MQTT: no fault event.
+    let mut events = fme::output::mqtt::EventTracker::default();
+    for r in &rows {
+        let ev = events.update(r, r.scale);
+        assert!(
+            !ev.iter().any(|e| matches!(
+                e,
+                fme::output::mqtt::EventKind::FaultRaised(_) | fme::output::mqtt::EventKind::FaultCleared(_)
+            )),
+            "{ev:?} at fault {}",
+            r.fault
+        );
+    }
+    // The console: the stopped block names no fault.
+    assert!(!fme::console::activity_line(&shared, &bank).contains(" fault "));
+    let mut out = String::new();
+    fme::console::Session::default().command("status", &shared, &bank, &mut out);
+    assert!(out.contains("fault 6 (stopped, not a fault)"), "{out}");
+}
+
 fn day_ms(day: &str) -> i64 {
     history::parse_day(day).expect("day") * 86_400_000
 }

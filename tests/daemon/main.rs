@@ -13,6 +13,7 @@ mod console_socat;
 mod e2e;
 mod history;
 mod metrics;
+mod metrics_text;
 mod modbus_client;
 mod modbus_server;
 mod support;

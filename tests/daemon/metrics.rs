@@ -107,8 +107,8 @@ const EXPECTED: &[(&str, &str)] = &[
     ("fme_status_word", "gauge"),
     ("fme_status_bit", "gauge"),
     ("fme_fault_code", "gauge"),
+    ("fme_fault_active", "gauge"),
     ("fme_feeding_recommended", "gauge"),
-    ("fme_camera_frames_per_second", "gauge"),
     ("fme_frames_captured_total", "counter"),
     ("fme_frames_processed_total", "counter"),
     ("fme_frames_dropped_total", "counter"),
@@ -116,8 +116,8 @@ const EXPECTED: &[(&str, &str)] = &[
     ("fme_camera_reconnects_total", "counter"),
     ("fme_pipeline_errors_total", "counter"),
     ("fme_updates_total", "counter"),
-    ("fme_detector_runs_per_second", "gauge"),
-    ("fme_depth_runs_per_second", "gauge"),
+    ("fme_detector_runs_total", "counter"),
+    ("fme_depth_runs_total", "counter"),
     ("fme_frame_to_register_latency_seconds", "histogram"),
     ("fme_modbus_requests_total", "counter"),
     ("fme_modbus_exceptions_total", "counter"),
@@ -185,8 +185,8 @@ fn fme_run_serves_parseable_metrics_and_survives_hostile_requests() {
     }
     assert!(first.keys().all(|k| k.starts_with("fme_")), "{:?}", first.keys());
     assert_eq!(labelled(&first, "fme_status_bit", "running"), 1.0);
-    assert_eq!(labelled(&first, "fme_status_bit", "camera-ok"), 1.0);
-    assert_eq!(labelled(&first, "fme_status_bit", "depth-calibrated"), 1.0, "swarm20 is calibrated");
+    assert_eq!(labelled(&first, "fme_status_bit", "camera_ok"), 1.0);
+    assert_eq!(labelled(&first, "fme_status_bit", "depth_calibrated"), 1.0, "swarm20 is calibrated");
     assert_eq!(value(&first, "fme_status_word") as u16 & 0b1011, 0b1011, "bits 0, 1, 3 in the raw word");
     let mean = value(&first, "fme_activity_mean_meters_per_second");
     assert!(mean.is_finite() && mean > 0.0, "activity {mean}");
