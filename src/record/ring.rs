@@ -18,6 +18,8 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 }
 
 /// Free and total bytes of the file system holding `dir`, and its block size (statvfs).
+// The statvfs fields are 32-bit on some 32-bit boards: the casts are not useless there.
+#[allow(clippy::unnecessary_cast)]
 pub fn fs_space(dir: &Path) -> std::io::Result<FsSpace> {
     use std::os::unix::ffi::OsStrExt as _;
     let c = std::ffi::CString::new(dir.as_os_str().as_bytes()).map_err(std::io::Error::other)?;

@@ -32,9 +32,7 @@ impl Tmpfs {
         let target = std::ffi::CString::new(dir.path().as_os_str().as_bytes()).expect("path");
         let opts = std::ffi::CString::new(format!("size={mb}m")).expect("options");
         // SAFETY: NUL-terminated strings that outlive the call.
-        let rc = unsafe {
-            libc::mount(c"tmpfs".as_ptr(), target.as_ptr(), c"tmpfs".as_ptr(), 0, opts.as_ptr().cast())
-        };
+        let rc = unsafe { libc::mount(c"tmpfs".as_ptr(), target.as_ptr(), c"tmpfs".as_ptr(), 0, opts.as_ptr().cast()) };
         if rc != 0 {
             eprintln!(
                 "SKIPPED: cannot mount a {mb} MB tmpfs on {} ({}): this disk-full test needs root",
@@ -96,7 +94,8 @@ fn a_freeze_that_fails_on_a_full_disk_leaves_no_partial() {
     std::fs::create_dir_all(&recordings).expect("recordings");
     fill(fs.path());
     let inputs = FreezeInputs { calibration: None, config_text: "# config\n".repeat(10_000) };
-    let e = freeze::freeze(&ring, &recordings, "20260101T000000Z", "alarm-high", &inputs).expect_err("the disk is full");
+    let e =
+        freeze::freeze(&ring, &recordings, "20260101T000000Z", "alarm-high", &inputs).expect_err("the disk is full");
     assert!(e.contains("No space left"), "{e}");
     assert_eq!(partials(&recordings), Vec::<String>::new(), "a failed freeze cleans up after itself");
 }
@@ -184,7 +183,12 @@ async fn the_ring_on_a_3_mb_disk_keeps_its_reserve_and_keeps_recording() {
     assert!(filled <= reserve + 64 * 1024, "the ring grew to the reserve: {filled} B free");
     // One frame (two 4 kB pages here) and the history's rows may be written before the ring sheds.
     assert!(min_free + 16 * 1024 >= reserve, "the ring took the reserve: {min_free} B free, reserve {reserve} B");
-    assert!(h.record.frames_written > written0 + 30, "frames keep flowing: {} -> {}", written0, h.record.frames_written);
+    assert!(
+        h.record.frames_written > written0 + 30,
+        "frames keep flowing: {} -> {}",
+        written0,
+        h.record.frames_written
+    );
     assert!(!h.record.disk_fault && h.record.write_errors == 0, "no pause: {:?}", h.record);
     assert_eq!(bits & status::RECORD_FAULT, 0, "status bit 7 stays clear: {bits:#06x}");
     assert!(hist1 > hist0, "the history keeps writing: {hist0} -> {hist1}");
@@ -217,30 +221,29 @@ fn the_history_resumes_within_seconds_of_space_freed() {
     let (tx, thread) = fme::history::spawn(dir.clone(), 90, 0.0, shared.clone()).expect("spawn");
     let st = &shared.history;
     let mut sent = 0u64;
-    let mut send = || {
+    let send = |sent: &mut u64| {
         tx.send(row(fme::history::now_unix_ms()));
-        sent += 1;
+        *sent += 1;
         std::thread::sleep(Duration::from_millis(50));
     };
     let deadline = Instant::now() + Duration::from_secs(10);
     while !(st.paused.load(Ordering::Relaxed) && shared.health().disk.history_fault) && Instant::now() < deadline {
-        send();
+        send(&mut sent);
     }
     assert!(st.paused.load(Ordering::Relaxed), "a full disk pauses the history");
     // Long enough for a fixed or fully backed-off retry delay to be the thing measured.
     for _ in 0..40 {
-        send();
+        send(&mut sent);
     }
     assert_eq!(st.written.load(Ordering::Relaxed), 0);
     std::fs::remove_file(&filler).expect("free the space");
     let freed = Instant::now();
     let deadline = freed + Duration::from_secs(15);
     while st.written.load(Ordering::Relaxed) == 0 && Instant::now() < deadline {
-        send();
+        send(&mut sent);
     }
     let resumed = freed.elapsed();
-    send();
-    drop(send);
+    send(&mut sent);
     drop(tx);
     thread.join().expect("history thread");
     let rows: usize = std::fs::read_dir(&dir)

@@ -8,8 +8,8 @@
 
 mod bad_frames;
 mod cli;
-mod disk;
 mod console_pty;
+mod disk;
 mod e2e;
 mod history;
 mod metrics;
