@@ -38,7 +38,7 @@ async fn run_and_save(
 ) -> (Vec<PathBuf>, fme::status::Health) {
     let source: Box<dyn FrameSource> = Box::new(RecordedSource::open(Path::new(SEQ), false, false).expect("open"));
     let pipeline = fme::service::build_pipeline(&cfg).expect("real pipeline");
-    let opts = RunOptions { max_frames: None, series };
+    let opts = RunOptions { max_frames: None, series, ring_writer: None };
     let mut daemon = Daemon::start(cfg, text, source, pipeline, opts).await.expect("start");
     assert!(tokio::time::timeout(Duration::from_secs(120), daemon.finished()).await.expect("ends"));
     daemon.shared().requests.request_save(label);

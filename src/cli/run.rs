@@ -109,7 +109,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     // Before the (slow) source and model loading: a duration no timer holds is a config error (exit 2).
     service::timing::Timing::from_config(&cfg).map_err(|e| UsageError(e.to_string()))?;
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("tokio runtime")?;
-    let opts = RunOptions { max_frames: args.max_frames, series: args.series.clone() };
+    let opts = RunOptions { max_frames: args.max_frames, series: args.series.clone(), ring_writer: None };
     rt.block_on(async move {
         // First, so that no signal during the (slow) model loading ends the process uncleanly.
         let mut signals = Signals::install().context("installing the signal handlers")?;

@@ -396,6 +396,9 @@ pub struct ServiceConfig {
     pub live_view_s: f64,
     /// On SIGTERM/SIGINT: keep serving the "stopped" registers this long before exiting, ms (<= 1500).
     pub stop_grace_ms: u64,
+    /// A write to the state directory (ring frame, snapshot, history row) still in flight after this
+    /// long is a stalled disk: status bit 7, s.
+    pub disk_stall_s: f64,
     /// Directory for recordings, snapshots and history when `$STATE_DIRECTORY` (systemd's
     /// `StateDirectory=`) is not set; empty = none (nothing is written to disk). See
     /// [`crate::status::state_dir`].
@@ -409,6 +412,7 @@ impl Default for ServiceConfig {
             stall_after_s: 5.0,
             live_view_s: 0.0,
             stop_grace_ms: 500,
+            disk_stall_s: 3.0,
             state_dir: PathBuf::new(),
         }
     }
@@ -425,6 +429,9 @@ pub struct RecordConfig {
     pub ring_s: f64,
     /// Largest size of the ring on disk, MB (10^6 bytes); the oldest frames go first.
     pub max_disk_mb: u64,
+    /// Free space the ring leaves on its file system for the history, snapshots and recordings, MB
+    /// (at most a quarter of the file system, so a small disk still keeps a ring).
+    pub reserve_mb: u64,
     /// Write a snapshot (frame with overlays + metric depth map) every this many seconds (0 = off), s.
     pub snapshot_every_s: f64,
     /// Snapshots kept (older ones are deleted).
@@ -450,6 +457,7 @@ impl Default for RecordConfig {
             enabled: true,
             ring_s: 60.0,
             max_disk_mb: 500,
+            reserve_mb: 64,
             snapshot_every_s: 0.0,
             keep_snapshots: 20,
             keep_recordings: 20,

@@ -12,8 +12,10 @@
 //! cut loses at most the rows of that window. A file is never left unreadable: the writer cuts a
 //! torn or zero-filled tail back to the last complete line when it opens a file again, and
 //! [`read_day_file`] skips a torn last line. Disk full or a read-only directory pauses the history
-//! (logged once per pause, rows counted as failed, retried every [`RETRY_AFTER`]); the registers
-//! are never affected.
+//! (logged once per pause, rows counted as failed, status bit 7): the rows wait in memory (at most
+//! [`PENDING_ROWS`], the oldest dropped first) and the writer tries again with backoff from
+//! [`RETRY_MIN`] to [`RETRY_MAX`], so the history resumes within seconds of space coming back,
+//! with the rows of the pause; the registers are never affected.
 
 pub mod plot;
 
@@ -43,8 +45,12 @@ pub const HEADER_WITHOUT_UNLIKE_FISH: &str =
 pub const HEADER_WITHOUT_SCALE: &str = "time_utc,activity_mps,smoothed_mps,ci95_mps,n_fish,bls,status,fault,feeding";
 /// Rows held between the publisher and the writer thread; when full, rows are dropped and counted.
 pub const QUEUE_ROWS: usize = 256;
-/// After a write error (disk full, read-only), the history pauses this long before trying again.
-pub const RETRY_AFTER: Duration = Duration::from_secs(60);
+/// After a write error (disk full, read-only), the first retry comes this soon...
+pub const RETRY_MIN: Duration = Duration::from_millis(250);
+/// ...and the delay doubles up to this (a failed append of one line costs next to nothing).
+pub const RETRY_MAX: Duration = Duration::from_secs(4);
+/// Rows held in memory while the disk takes no writes (an hour at `output.rate_hz` = 1, ~60 kB).
+pub const PENDING_ROWS: usize = 3600;
 const DAY_MS: i64 = 86_400_000;
 
 /// One output update, as written to the history.
@@ -585,73 +591,124 @@ pub fn spawn(
     Ok((HistorySender { tx, shared }, handle))
 }
 
+/// Marks the history's write in flight (health `disk.history_since`, status bit 7 once it has
+/// waited `service.disk_stall_s`) while `f` runs.
+fn timed<R>(shared: &Shared, f: impl FnOnce() -> R) -> R {
+    shared.with_health(|h| h.disk.history_since = Some(Instant::now()));
+    let r = f();
+    shared.with_health(|h| h.disk.history_since = None);
+    r
+}
+
+/// The writer thread's state between rows: rows waiting for the disk and when to try it again.
+struct Pending {
+    rows: std::collections::VecDeque<Row>,
+    retry_at: Option<Instant>,
+    backoff: crate::backoff::Backoff,
+    lost: u64,
+}
+
 fn writer_loop(mut w: DayWriter, rx: &Receiver<Row>, shared: &Shared) {
     let st: &HistoryStatus = &shared.history;
-    let mut paused_until: Option<Instant> = None;
-    let mut lost_in_pause = 0u64;
+    let mut p = Pending {
+        rows: std::collections::VecDeque::new(),
+        retry_at: None,
+        backoff: crate::backoff::Backoff::new(RETRY_MIN, RETRY_MAX),
+        lost: 0,
+    };
     loop {
-        let row = match rx.recv_timeout(Duration::from_millis(500)) {
-            Ok(r) => r,
+        let wait = p.retry_at.map_or(Duration::from_millis(500), |t| {
+            t.saturating_duration_since(Instant::now()).clamp(Duration::from_millis(1), Duration::from_millis(500))
+        });
+        match rx.recv_timeout(wait) {
+            Ok(row) => {
+                if p.retry_at.is_some() {
+                    st.failed.fetch_add(1, Ordering::Relaxed);
+                }
+                if p.rows.len() >= PENDING_ROWS {
+                    p.rows.pop_front();
+                    p.lost += 1;
+                }
+                p.rows.push_back(row);
+            }
             Err(RecvTimeoutError::Timeout) => {
-                let _ = w.sync_if_due(now_unix_ms());
-                continue;
+                if p.retry_at.is_none() {
+                    let _ = timed(shared, || w.sync_if_due(now_unix_ms()));
+                }
             }
             Err(RecvTimeoutError::Disconnected) => break,
-        };
-        if paused_until.is_some_and(|t| Instant::now() < t) {
-            st.failed.fetch_add(1, Ordering::Relaxed);
-            lost_in_pause += 1;
-            continue;
         }
-        match w.write(&row) {
+        if p.retry_at.is_none_or(|t| Instant::now() >= t) {
+            drain(&mut w, &mut p, shared);
+        }
+    }
+    // One last try for what waits (the final "stopped" row among it), then the final fsync.
+    drain(&mut w, &mut p, shared);
+    if let Err(e) = timed(shared, || w.sync()) {
+        shared.log(Level::WARN, format!("history: final fsync of {}: {e}", w.dir.display()));
+    }
+}
+
+/// Writes the waiting rows in order; on an error keeps them and schedules the next try.
+fn drain(w: &mut DayWriter, p: &mut Pending, shared: &Shared) {
+    let st: &HistoryStatus = &shared.history;
+    while let Some(row) = p.rows.front().copied() {
+        match timed(shared, || w.write(&row)) {
             Ok(rep) => {
+                p.rows.pop_front();
                 st.written.fetch_add(1, Ordering::Relaxed);
-                if paused_until.take().is_some() {
+                if p.retry_at.take().is_some() {
+                    p.backoff.reset();
                     st.paused.store(false, Ordering::Relaxed);
+                    shared.with_health(|h| h.disk.history_fault = false);
                     shared.log(
                         Level::INFO,
-                        format!("history: writing again to {} ({lost_in_pause} rows lost)", w.dir.display()),
-                    );
-                    lost_in_pause = 0;
-                }
-                if rep.cut_bytes > 0 {
-                    shared.log(
-                        Level::WARN,
                         format!(
-                            "history: cut a torn last line ({} bytes) of {} (power cut or kill mid-write)",
-                            rep.cut_bytes,
-                            day_path(&w.dir, day_of(row.unix_ms)).display()
+                            "history: writing again to {} ({} held rows follow, {} lost)",
+                            w.dir.display(),
+                            p.rows.len(),
+                            p.lost
                         ),
                     );
+                    p.lost = 0;
                 }
-                if rep.deleted > 0 {
-                    shared.log(
-                        Level::INFO,
-                        format!("history: deleted {} day file(s) past history.keep_days", rep.deleted),
-                    );
-                }
+                report_open(w, &row, rep, shared);
             }
             Err(e) => {
-                st.failed.fetch_add(1, Ordering::Relaxed);
-                lost_in_pause += 1;
                 // Logged once per pause: a full disk must not also fill the journal.
-                if paused_until.is_none() {
+                if p.retry_at.is_none() {
+                    st.failed.fetch_add(p.rows.len() as u64, Ordering::Relaxed);
                     st.paused.store(true, Ordering::Relaxed);
+                    shared.with_health(|h| h.disk.history_fault = true);
                     shared.log(
                         Level::ERROR,
                         format!(
-                            "history: cannot write to {}: {e}; history paused (rows counted as history-failed), retrying every {} s; the outputs are not affected",
+                            "history: cannot write to {}: {e}; history paused (rows counted as history-failed, up to {PENDING_ROWS} held in memory), retrying with backoff up to {} s; the outputs are not affected",
                             w.dir.display(),
-                            RETRY_AFTER.as_secs()
+                            RETRY_MAX.as_secs()
                         ),
                     );
                 }
-                paused_until = Some(Instant::now() + RETRY_AFTER);
+                p.retry_at = Some(Instant::now() + p.backoff.next_delay());
+                return;
             }
         }
     }
-    if let Err(e) = w.sync() {
-        shared.log(Level::WARN, format!("history: final fsync of {}: {e}", w.dir.display()));
+}
+
+fn report_open(w: &DayWriter, row: &Row, rep: OpenReport, shared: &Shared) {
+    if rep.cut_bytes > 0 {
+        shared.log(
+            Level::WARN,
+            format!(
+                "history: cut a torn last line ({} bytes) of {} (power cut or kill mid-write)",
+                rep.cut_bytes,
+                day_path(&w.dir, day_of(row.unix_ms)).display()
+            ),
+        );
+    }
+    if rep.deleted > 0 {
+        shared.log(Level::INFO, format!("history: deleted {} day file(s) past history.keep_days", rep.deleted));
     }
 }
 

@@ -58,8 +58,9 @@ pub mod status {
     pub const PLC_LINK_OK: u16 = 1 << 5;
     /// Bit 6: too few fish tracked for a reliable mean.
     pub const TOO_FEW_FISH: u16 = 1 << 6;
-    /// Bit 7: recording paused after a disk write error (disk full, read-only; docs/recording.md).
-    /// The activity values are unaffected.
+    /// Bit 7: disk fault: recording paused or the history held in memory after a write error (disk
+    /// full, read-only), or a write to the state directory stalled for `service.disk_stall_s`
+    /// (docs/recording.md). The activity values are unaffected.
     pub const RECORD_FAULT: u16 = 1 << 7;
     /// Bit 8: the metric scale in use comes from the fish, not the reference objects (`depth.scale`).
     pub const SCALE_FROM_FISH: u16 = 1 << 8;

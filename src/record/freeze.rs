@@ -42,9 +42,13 @@ fn frame_rate(ring: &Ring) -> f64 {
     }
 }
 
+/// Prefix of the hidden folder a recording is staged in before its rename.
+pub const PARTIAL_PREFIX: &str = ".partial-";
+
 /// Writes the ring as `<recordings>/<stamp>-<label>/` (staged in a hidden folder and renamed, so a
 /// recording appears complete or not at all). Frames are hard links into the ring where the file
-/// system allows, copies otherwise. Errors name the file.
+/// system allows, copies otherwise. A failed freeze removes its staged folder: its hard links
+/// would pin ring frames on the disk. Errors name the file.
 pub fn freeze(
     ring: &Ring,
     recordings: &Path,
@@ -53,17 +57,42 @@ pub fn freeze(
     inputs: &FreezeInputs,
 ) -> Result<PathBuf, String> {
     let name = format!("{stamp}-{}", clean_label(label));
-    let target = recordings.join(&name);
-    let staged = recordings.join(format!(".partial-{name}"));
+    let staged = recordings.join(format!("{PARTIAL_PREFIX}{name}"));
+    let result = stage_and_rename(ring, recordings, &name, &staged, inputs);
+    if result.is_err() {
+        let _ = std::fs::remove_dir_all(&staged);
+    }
+    result
+}
+
+/// Deletes the staged folders (`.partial-*`) left in `recordings` by a freeze that was killed or
+/// failed: only the writer thread freezes, so none is in progress when it calls this. Returns how
+/// many.
+pub fn remove_partials(recordings: &Path) -> usize {
+    let Ok(rd) = std::fs::read_dir(recordings) else { return 0 };
+    rd.flatten()
+        .filter(|e| e.file_name().to_str().is_some_and(|n| n.starts_with(PARTIAL_PREFIX)))
+        .filter(|e| std::fs::remove_dir_all(e.path()).is_ok())
+        .count()
+}
+
+fn stage_and_rename(
+    ring: &Ring,
+    recordings: &Path,
+    name: &str,
+    staged: &Path,
+    inputs: &FreezeInputs,
+) -> Result<PathBuf, String> {
+    let target = recordings.join(name);
     let io = |p: &Path, e: std::io::Error| format!("{}: {e}", p.display());
     let entries = ring.entries();
     let Some(first) = entries.front() else { return Err("the ring is empty: nothing to save".into()) };
     if staged.exists() {
-        let _ = std::fs::remove_dir_all(&staged);
+        let _ = std::fs::remove_dir_all(staged);
     }
     let img = staged.join("img1");
     std::fs::create_dir_all(&img).map_err(|e| io(&img, e))?;
-    std::fs::create_dir_all(staged.join("det")).map_err(|e| io(&staged, e))?;
+    std::fs::create_dir_all(staged.join("det")).map_err(|e| io(staged, e))?;
     let (mut det, mut tracks, mut times) = (String::new(), String::new(), String::from("frame,t\n"));
     let series_path = staged.join("series.csv");
     let mut series = SeriesWriter::create(&series_path, "")?;
@@ -88,7 +117,7 @@ pub fn freeze(
     series.finish()?;
     let fps = frame_rate(ring);
     let info = SeqInfo {
-        name: name.clone(),
+        name: name.to_string(),
         im_dir: "img1".into(),
         frame_rate: fps,
         seq_length: entries.len() as u32,
@@ -118,13 +147,15 @@ pub fn freeze(
             }
         }
     }
-    std::fs::rename(&staged, &target).map_err(|e| io(&target, e))?;
+    std::fs::rename(staged, &target).map_err(|e| io(&target, e))?;
     Ok(target)
 }
 
 /// Deletes the oldest entries of `dir` whose names start with a digit (recordings, snapshots) so
-/// that at most `keep` remain (0 = keep all). Names begin with a UTC stamp, so name order is age.
+/// that at most `keep` remain (0 = keep all), and any staged folder a failed freeze left. Names
+/// begin with a UTC stamp, so name order is age.
 pub fn rotate(dir: &Path, keep: usize) {
+    remove_partials(dir);
     if keep == 0 {
         return;
     }

@@ -8,9 +8,12 @@
 //!             recordings/<UTC>-<label>/ (console `record save`, alarms, faults: a MOTChallenge sequence)
 //! ```
 //! The pipeline thread never waits on the disk: records go through a bounded queue and come back
-//! through a pool for reuse. A write error (disk full, read-only) is logged once a minute at most,
-//! shown in the status (bit 7, console `record`) and pauses recording for 30 s; the activity index
-//! keeps flowing to the outputs.
+//! through a pool for reuse; every disk operation (opening the ring, clearing it, freezing) runs on
+//! the writer thread, so a stalled disk holds only that thread (shown as status bit 7 after
+//! `service.disk_stall_s`). The ring keeps `record.reserve_mb` free and drops its oldest frames on
+//! a full disk. A write error it cannot shed is logged once a minute at most, shown in the status
+//! (bit 7, console `record`) and pauses recording, retried with backoff (1 s doubling to 30 s);
+//! the activity index keeps flowing to the outputs.
 
 pub mod freeze;
 pub mod ring;
@@ -23,6 +26,7 @@ use freeze::FreezeInputs;
 use ring::{Ring, RingEntry};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::time::{Duration, Instant};
 use tracing::Level;
@@ -50,7 +54,8 @@ pub struct Recorder {
     tx: Option<SyncSender<Box<FrameRecord>>>,
     pool: Receiver<Box<FrameRecord>>,
     shared: Arc<Shared>,
-    ring: bool,
+    /// The ring is on (`record.enabled`); cleared by the writer when it cannot open the ring.
+    ring: Arc<AtomicBool>,
     snapshot_every_s: f64,
     next_snapshot_t: Option<f64>,
     alarm: (f64, f64),
@@ -61,8 +66,10 @@ pub struct Recorder {
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
-/// Pause after a write error before trying again.
-const RETRY_AFTER: Duration = Duration::from_secs(30);
+/// Pause after a write error before trying again: short at first (space may come back at once,
+/// the ring sheds frames), doubling to the longest.
+const RETRY_MIN: Duration = Duration::from_secs(1);
+const RETRY_MAX: Duration = Duration::from_secs(30);
 
 struct Writer {
     dir: PathBuf,
@@ -72,13 +79,66 @@ struct Writer {
     keep_snapshots: usize,
     keep_recordings: usize,
     paused_until: Option<Instant>,
+    retry: crate::backoff::Backoff,
     last_error_log: Option<Instant>,
     jpeg: Vec<u8>,
 }
 
+/// Marks a write to the state directory in flight (health `disk.record_since`) while it lives.
+struct InFlight(Arc<Shared>);
+
+impl InFlight {
+    fn new(shared: &Arc<Shared>) -> Self {
+        shared.with_health(|h| h.disk.record_since = Some(Instant::now()));
+        Self(shared.clone())
+    }
+}
+
+impl Drop for InFlight {
+    fn drop(&mut self) {
+        self.0.with_health(|h| h.disk.record_since = None);
+    }
+}
+
 impl Writer {
+    /// Opens the ring (deleting an earlier run's frames) and removes the staged folders of freezes
+    /// that were killed or failed: on this thread, since either may wait on a stalled disk.
+    fn open(&mut self, rc: &crate::config::RecordConfig, write: Option<ring::WriteFile>, ring_on: &AtomicBool) {
+        let _busy = InFlight::new(&self.shared);
+        let removed = freeze::remove_partials(&self.dir.join("recordings"));
+        if removed > 0 {
+            self.shared.log(
+                Level::WARN,
+                format!("recorder: removed {removed} unfinished recording(s) (.partial-*) left by a freeze that failed or was killed"),
+            );
+        }
+        if !rc.enabled {
+            return;
+        }
+        let dir = self.dir.join("ring");
+        match Ring::open(&dir, rc.ring_s, rc.max_disk_mb.saturating_mul(1_000_000)) {
+            Ok(r) => {
+                let r = r.with_reserve(rc.reserve_mb.saturating_mul(1_000_000));
+                self.ring = Some(match write {
+                    Some(w) => r.with_writer(w),
+                    None => r,
+                });
+            }
+            Err(e) => {
+                ring_on.store(false, Ordering::Relaxed);
+                self.shared.log(Level::ERROR, format!("recorder: {}: {e}; the black box is off", dir.display()));
+                self.shared.with_health(|h| {
+                    h.record.active = false;
+                    h.record.disk_fault = true;
+                    h.record.write_errors += 1;
+                });
+            }
+        }
+    }
+
     fn fault(&mut self, what: &str, e: &str) {
-        self.paused_until = Some(Instant::now() + RETRY_AFTER);
+        let wait = self.retry.next_delay();
+        self.paused_until = Some(Instant::now() + wait);
         let log = self.last_error_log.is_none_or(|t| t.elapsed() >= Duration::from_secs(60));
         self.shared.with_health(|h| {
             h.record.write_errors += 1;
@@ -89,12 +149,17 @@ impl Writer {
             self.last_error_log = Some(Instant::now());
             self.shared.log(
                 Level::ERROR,
-                format!("recorder: {what}: {e}; recording paused (retried every 30 s; outputs unaffected)"),
+                format!(
+                    "recorder: {what}: {e}; recording paused (retried after {} s, then with backoff up to {} s; outputs unaffected)",
+                    wait.as_secs(),
+                    RETRY_MAX.as_secs()
+                ),
             );
         }
     }
 
     fn recovered(&mut self) {
+        self.retry.reset();
         if self.paused_until.take().is_some() {
             self.shared.with_health(|h| h.record.disk_fault = false);
             self.shared.log(Level::INFO, "recorder: writing again");
@@ -132,6 +197,7 @@ impl Writer {
                 };
                 let result = match self.ring.as_mut() {
                     Some(ring) if !bytes.is_empty() => {
+                        let _busy = InFlight::new(&self.shared);
                         ring.push(entry, bytes).map(|()| (ring.bytes(), ring.entries().len()))
                     }
                     _ => Err(std::io::Error::other("frame cannot be encoded")),
@@ -156,6 +222,7 @@ impl Writer {
             let name = format!("{}-{:08}", freeze::utc_stamp(std::time::SystemTime::now()), frame.seq);
             let depth = (!r.depth.is_empty()).then_some(r.depth.as_slice());
             let dir = self.dir.join("snapshots");
+            let _busy = InFlight::new(&self.shared);
             match snapshot::write(&dir, &name, frame, &r.view, r.sample.as_ref(), depth, self.keep_snapshots) {
                 Ok(p) => {
                     self.recovered();
@@ -177,6 +244,7 @@ impl Writer {
         };
         let dir = self.dir.join("recordings");
         let stamp = freeze::utc_stamp(std::time::SystemTime::now());
+        let _busy = InFlight::new(&self.shared);
         let result = std::fs::create_dir_all(&dir)
             .map_err(|e| format!("{}: {e}", dir.display()))
             .and_then(|()| freeze::freeze(ring, &dir, &stamp, label, &self.inputs));
@@ -198,46 +266,37 @@ impl Writer {
 
 impl Recorder {
     /// Starts the writer thread when there is a state directory; `None` when there is none (nothing
-    /// is written to disk). A ring that cannot be created is logged and recording stays off.
-    pub fn start(cfg: &Config, freeze_gap: Duration, shared: Arc<Shared>) -> Option<Self> {
+    /// is written to disk). The writer opens the ring; one that cannot be opened is logged and
+    /// recording stays off. `write` replaces the ring's frame writer (tests: a stalled disk).
+    pub fn start(
+        cfg: &Config,
+        freeze_gap: Duration,
+        shared: Arc<Shared>,
+        write: Option<ring::WriteFile>,
+    ) -> Option<Self> {
         let dir = crate::status::state_dir(cfg)?;
         let rc = &cfg.record;
-        let ring = if rc.enabled {
-            match Ring::open(&dir.join("ring"), rc.ring_s, rc.max_disk_mb.saturating_mul(1_000_000)) {
-                Ok(r) => Some(r),
-                Err(e) => {
-                    shared.log(
-                        Level::ERROR,
-                        format!("recorder: {}: {e}; the black box is off", dir.join("ring").display()),
-                    );
-                    shared.with_health(|h| {
-                        h.record.disk_fault = true;
-                        h.record.write_errors += 1;
-                    });
-                    None
-                }
-            }
-        } else {
-            None
-        };
         let calibration = crate::pipeline::Calibration::for_config(cfg).ok().flatten().map(|c| c.path);
         let (tx, rx) = std::sync::mpsc::sync_channel::<Box<FrameRecord>>(rc.queue_frames);
         let (pool_tx, pool) = std::sync::mpsc::sync_channel::<Box<FrameRecord>>(rc.queue_frames + 2);
-        let ring_on = ring.is_some();
-        shared.with_health(|h| h.record.active = ring_on);
+        let ring_on = Arc::new(AtomicBool::new(rc.enabled));
+        shared.with_health(|h| h.record.active = rc.enabled);
         let mut w = Writer {
             dir: dir.clone(),
-            ring,
+            ring: None,
             inputs: FreezeInputs { calibration, config_text: shared.config_text.clone() },
             shared: shared.clone(),
             keep_snapshots: rc.keep_snapshots,
             keep_recordings: rc.keep_recordings,
             paused_until: None,
+            retry: crate::backoff::Backoff::new(RETRY_MIN, RETRY_MAX),
             last_error_log: None,
             jpeg: Vec::new(),
         };
         let sh = shared.clone();
+        let (rc2, on) = (rc.clone(), ring_on.clone());
         let thread = std::thread::Builder::new().name("fme-recorder".into()).spawn(move || {
+            w.open(&rc2, write, &on);
             loop {
                 match rx.recv_timeout(Duration::from_millis(100)) {
                     Ok(mut r) => {
@@ -278,7 +337,7 @@ impl Recorder {
         };
         shared.log(
             Level::INFO,
-            format!("recorder: state directory {}{}", dir.display(), if ring_on { "" } else { " (ring off)" }),
+            format!("recorder: state directory {}{}", dir.display(), if rc.enabled { "" } else { " (ring off)" }),
         );
         Some(Self {
             tx: Some(tx),
@@ -309,7 +368,8 @@ impl Recorder {
                 self.next_snapshot_t = Some(t + self.snapshot_every_s);
             }
         }
-        if !(self.ring || snap) {
+        let ring = self.ring.load(Ordering::Relaxed);
+        if !(ring || snap) {
             return;
         }
         let Some(tx) = &self.tx else { return };
@@ -325,7 +385,7 @@ impl Recorder {
         }
         pipeline.frame_view(&mut r.view, snap);
         r.sample = sample;
-        r.ring = self.ring;
+        r.ring = ring;
         r.snapshot = snap;
         r.depth.clear();
         if snap && !pipeline.depth_grid((frame.width, frame.height), snapshot::DEPTH_GRID, &mut r.depth) {
@@ -347,7 +407,7 @@ impl Recorder {
     /// and alarms (smoothed activity outside `record.alarm_*`), at most one per
     /// `record.freeze_min_gap_s`.
     pub fn watch(&mut self, sample: Option<&ActivitySample>, errors: u64) {
-        if !self.ring {
+        if !self.ring.load(Ordering::Relaxed) {
             return;
         }
         let (camera_ok, stage) = self.shared.with_health(|h| (h.camera_ok, h.stage));

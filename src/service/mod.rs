@@ -126,6 +126,9 @@ pub struct RunOptions {
     pub max_frames: Option<u64>,
     /// Write every frame's sample to this CSV (`fme run --series`).
     pub series: Option<std::path::PathBuf>,
+    /// Writes the black box's ring frames instead of the file system (tests: a stalled or failing
+    /// disk); `None` = the file system.
+    pub ring_writer: Option<crate::record::ring::WriteFile>,
 }
 
 /// A running daemon.
@@ -546,7 +549,7 @@ impl Daemon {
             None => None,
         };
         let (finished_tx, finished) = tokio::sync::watch::channel(false);
-        let mut recorder = crate::record::Recorder::start(&cfg, timing.freeze_gap, shared.clone());
+        let mut recorder = crate::record::Recorder::start(&cfg, timing.freeze_gap, shared.clone(), opts.ring_writer);
         if let Some(t) = recorder.as_mut().and_then(crate::record::Recorder::take_thread) {
             other_threads.push(t);
         }

@@ -22,6 +22,7 @@ pub struct Publisher {
     mode: ModbusMode,
     stale_after: Duration,
     stall_after: Duration,
+    disk_stall: Duration,
     /// Last publish (keepalive publishes when this gets old).
     pub last_publish: Option<Instant>,
     line: String,
@@ -44,6 +45,7 @@ impl Publisher {
             mode: cfg.output.modbus.mode,
             stale_after: timing.stale_after,
             stall_after: timing.stall_after,
+            disk_stall: timing.disk_stall,
             last_publish: None,
             line: String::with_capacity(128),
             stopped: false,
@@ -110,7 +112,8 @@ impl Publisher {
         if h.last_sample.is_none_or(|s| s.flags.too_few_fish) {
             bits |= status::TOO_FEW_FISH;
         }
-        if h.record.disk_fault {
+        // Bit 7: the state directory's disk fails writes (recorder or history) or a write stalls.
+        if h.record.disk_fault || h.disk.history_fault || h.disk.stalled_for(now) >= self.disk_stall {
             bits |= status::RECORD_FAULT;
         }
         if h.calib.source == crate::pipeline::ScaleSource::Fish {

@@ -20,6 +20,8 @@ pub struct Timing {
     pub live_view: Option<Duration>,
     /// `record.freeze_min_gap_s`.
     pub freeze_gap: Duration,
+    /// `service.disk_stall_s`.
+    pub disk_stall: Duration,
 }
 
 /// A key whose value gives no usable duration.
@@ -70,6 +72,7 @@ impl Timing {
             stall_after: secs("service.stall_after_s", cfg.service.stall_after_s)?,
             live_view,
             freeze_gap: secs("record.freeze_min_gap_s", cfg.record.freeze_min_gap_s)?,
+            disk_stall: secs("service.disk_stall_s", cfg.service.disk_stall_s)?,
         })
     }
 }

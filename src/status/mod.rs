@@ -120,6 +120,8 @@ pub struct Health {
     pub tracks_text: String,
     /// The recorder (black box, snapshots).
     pub record: RecordHealth,
+    /// Writes to the state directory in flight and the history's write state (status bit 7).
+    pub disk: DiskHealth,
     /// The MQTT telemetry link (docs/mqtt.md).
     pub mqtt: MqttHealth,
 }
@@ -147,6 +149,31 @@ pub struct RecordHealth {
     pub last: String,
     /// Snapshots written.
     pub snapshots: u64,
+}
+
+/// Writes to the state directory in flight: a write that has not returned for
+/// `service.disk_stall_s` is a stalled disk (frozen file system, dying SD card), shown as status
+/// bit 7. The writers are threads of their own, so a stall never holds the PLC side or a shutdown.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct DiskHealth {
+    /// The recorder's current write (ring frame, snapshot, freeze) began then.
+    pub record_since: Option<Instant>,
+    /// The history's current write or fsync began then.
+    pub history_since: Option<Instant>,
+    /// The history cannot write (disk full, read-only) and holds its rows in memory meanwhile.
+    pub history_fault: bool,
+}
+
+impl DiskHealth {
+    /// How long the oldest write in flight has been waiting at `now` (zero when none is).
+    pub fn stalled_for(&self, now: Instant) -> std::time::Duration {
+        [self.record_since, self.history_since]
+            .into_iter()
+            .flatten()
+            .map(|t| now.saturating_duration_since(t))
+            .max()
+            .unwrap_or_default()
+    }
 }
 
 /// State of the MQTT link (`[output.mqtt]`).
@@ -259,6 +286,7 @@ impl Health {
             latency: LatencyHistogram::default(),
             tracks_text: String::new(),
             record: RecordHealth::default(),
+            disk: DiskHealth::default(),
             mqtt: MqttHealth::default(),
         }
     }
@@ -273,7 +301,8 @@ pub struct HistoryStatus {
     pub written: AtomicU64,
     /// Rows dropped because the writer's queue was full (the disk was too slow).
     pub dropped: AtomicU64,
-    /// Rows not written because of a write error (disk full, read-only) or while paused after one.
+    /// Rows that met a write error (disk full, read-only) or came while paused after one: held in
+    /// memory (up to `history::PENDING_ROWS`) and written late once the disk takes writes again.
     pub failed: AtomicU64,
     /// Paused after a write error (retried later).
     pub paused: AtomicBool,

@@ -1,5 +1,5 @@
 //! The daemon's edges in one test binary sharing [`support`]: start-up and the command line,
-//! capture of bad frames, the serial console over a pseudo-terminal, the whole daemon end to end,
+//! capture of bad frames, a small, full or stalled disk under the state directory, the serial console over a pseudo-terminal, the whole daemon end to end,
 //! the Modbus roles (in-process PLC peers) and the Prometheus endpoint. The real pipeline has its
 //! own tests (`pipeline_e2e.rs`); the in-process tests here use the frame-difference test double so
 //! they need no models (the `fme run` ones of `cli`, `history` and `metrics` use the real models).
@@ -10,6 +10,7 @@ mod bad_frames;
 mod cli;
 mod console_pty;
 mod console_socat;
+mod disk;
 mod e2e;
 mod history;
 mod metrics;
