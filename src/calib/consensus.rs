@@ -104,7 +104,7 @@ pub fn consensus(refs: &[Reference], sol: &Solution, opts: &Options) -> Option<C
         let px: Vec<crate::geometry::Pixel> = others.iter().map(|r| r.pixel).collect();
         let cam = pnp::refine(&sol.camera, &w, &px, est);
         let (chi2, dof) = fit_chi2(&cam, &others, est, opts);
-        if !(chi2 <= fit_limit(dof)) {
+        if chi2.is_nan() || chi2 > fit_limit(dof) {
             continue;
         }
         let Some(info) = information(&cam, &others, est, opts) else { continue };

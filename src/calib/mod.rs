@@ -355,7 +355,7 @@ pub fn calibrate(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Opt
         return Err(e);
     }
     let (chi2, dof) = consensus::fit_chi2(&sol.camera, refs, sol.estimated_intrinsics, opts);
-    if sol.rms_px.is_nan() || (sol.rms_px > opts.max_rms_px && !(chi2 <= consensus::fit_limit(dof))) {
+    if sol.rms_px.is_nan() || (sol.rms_px > opts.max_rms_px && (chi2.is_nan() || chi2 > consensus::fit_limit(dof))) {
         let (i, worst) = sol
             .residuals
             .iter()
