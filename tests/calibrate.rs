@@ -1,12 +1,17 @@
 //! `fme calibrate` (docs/calibration.md): the pose recovered from the reference objects of the
 //! bundled calibrated recording tests/data/swarm20 (layout F) with 0.5 px of seeded pixel noise, a
 //! mis-measured reference named by the consensus step, the activity series of `fme eval` under the
-//! recovered calibration against the one under the true meta.json, `--check`, and bad input.
+//! recovered calibration against the one under the true meta.json, `--check`, and bad input; and
+//! over 50 seeded random cage cameras with realistic click and tape noise, that no good reference
+//! is refused while one moved by 0.3 m is named (the accuracy table of docs/calibration.md is made
+//! by the ignored `accuracy_table` test here).
 
 use fme::calib::{self, CalibError, Options, Reference};
-use fme::geometry::{Camera, Pixel, WorldPoint};
+use fme::geometry::{Camera, Intrinsics, Pixel, Pose, WorldPoint};
 use fme::rng::Rng;
 use fme::sequence::Meta;
+use fme::units::Metres;
+use nalgebra::{Rotation3, Vector3};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -38,8 +43,9 @@ fn references(m: &Meta, cam: &Camera, noise_px: f64, seed: u64) -> Vec<Reference
         .collect()
 }
 
+/// The command's defaults: 3 px limit, 1.5 px clicks, 1 cm tape.
 fn opts(m: &Meta) -> Options {
-    Options { max_rms_px: 3.0, width: m.width, height: m.height }
+    Options { max_rms_px: 3.0, click_px: 1.5, tape_m: 0.01, width: m.width, height: m.height }
 }
 
 fn percentile(v: &mut [f64], q: f64) -> f64 {
@@ -149,6 +155,8 @@ fn eval_with_the_recovered_calibration_matches_the_true_one() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
     assert!(stdout.contains("error_px") && stdout.contains("cube3") && stdout.contains("RMS"), "{stdout}");
+    let written = std::fs::read_to_string(&calib).unwrap();
+    assert!(written.contains("\"click_px\": 1.5") && written.contains("\"tape_m\": 0.01"), "{written}");
     let img = image::open(&overlay).expect("overlay PNG");
     assert_eq!((img.width(), img.height()), (m.width, m.height));
 
@@ -237,7 +245,22 @@ fn bad_input_exits_2_naming_the_problem() {
     let mut outside = good.clone();
     outside[6].pixel.u = 700.0;
     expect("outside.csv", &outside, &[], &["'cube7'", "outside the 640x384 image"]);
-    expect("limit.csv", &good, &["--max-rms", "0.05"], &["over the limit of 0.05 px", "1.33x"]);
+    // Over --max-rms is refused only when the stated noise does not explain it.
+    let csv = write_csv(dir.path(), "limit.csv", &good);
+    let (code, err) = run(&csv, &["--max-rms", "0.05"]);
+    assert_eq!(code, Some(0), "0.5 px of noise is within the default --click-px 1.5: {err}");
+    expect(
+        "limit.csv",
+        &good,
+        &["--max-rms", "0.05", "--click-px", "0.01", "--tape-m", "0.0001"],
+        &["over the limit of 0.05 px", "--click-px 0.01", "1.33x"],
+    );
+    for (flag, value) in [("--click-px", "0"), ("--click-px", "nan"), ("--tape-m", "-0.01"), ("--tape-m", "inf")] {
+        let arg = format!("{flag}={value}");
+        let (code, err) = run(&csv, &[arg.as_str()]);
+        assert_eq!(code, Some(2), "{arg}: {err}");
+        assert!(err.contains(flag) && err.contains("positive"), "{arg}: {err}");
+    }
     let noisy = references(&m, &truth, 6.0, 5);
     expect("noisy.csv", &noisy, &[], &["over the limit of 3 px"]);
     // No intrinsics and coplanar references: the message says what to give.
@@ -322,4 +345,228 @@ fn every_4_and_5_subset_converges() {
     }
     println!("worst centre error {worst:.2e} m; failed {failed:?}");
     assert!(failed.is_empty(), "{} subsets failed: {failed:?}", failed.len());
+}
+
+/// A synthetic commissioning: a camera in a fish cage and references spread through its view.
+struct Scene {
+    truth: Camera,
+    width: u32,
+    height: u32,
+    /// True face centres.
+    world: Vec<WorldPoint>,
+}
+
+/// Camera `seed`: 640x384 or 1280x720, 60-100 degree field of view, 0.3-2.5 m up, any heading,
+/// tilted 30 degrees down to 10 up and rolled by up to 5 degrees; `n` references at random pixels
+/// of the central 90% of the image, 1-6 m deep, at least 0.3 m and 5% of the image width apart.
+fn scene(seed: u64, n: usize) -> Scene {
+    let mut rng = Rng::derive(seed, 0xca1b);
+    let (width, height) = if rng.uniform() < 0.5 { (640, 384) } else { (1280, 720) };
+    let k = Intrinsics::from_hfov(width, height, rng.range(60.0, 100.0)).unwrap();
+    let eye = WorldPoint::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), rng.range(0.3, 2.5));
+    let (heading, tilt) = (rng.range(0.0, std::f64::consts::TAU), rng.range(-30.0f64, 10.0).to_radians());
+    let dir = Vector3::new(heading.cos() * tilt.cos(), heading.sin() * tilt.cos(), tilt.sin());
+    let mut pose = Pose::look_at(eye, WorldPoint(eye.0 + dir), Vector3::z()).unwrap();
+    let roll = Rotation3::from_euler_angles(0.0, 0.0, rng.range(-5.0f64, 5.0).to_radians()).into_inner();
+    pose.rotation = roll * pose.rotation;
+    pose.translation = -(pose.rotation * eye.0);
+    let truth = Camera { intrinsics: k, pose };
+    let (w, h) = (f64::from(width), f64::from(height));
+    let (mut world, mut pixels): (Vec<WorldPoint>, Vec<Pixel>) = (Vec::new(), Vec::new());
+    while world.len() < n {
+        let px = Pixel::new(rng.range(0.05, 0.95) * w, rng.range(0.05, 0.95) * h);
+        let p = truth.pixel_to_world(px, Metres(rng.range(1.0, 6.0))).unwrap();
+        if world
+            .iter()
+            .zip(&pixels)
+            .all(|(q, r)| q.distance(&p).get() >= 0.3 && (r.u - px.u).hypot(r.v - px.v) >= 0.05 * w)
+        {
+            world.push(p);
+            pixels.push(px);
+        }
+    }
+    Scene { truth, width, height, world }
+}
+
+/// The references as measured: each face centre off by `tape_m` and each marked pixel by
+/// `click_px`, per axis (Gaussian).
+fn measure(s: &Scene, click_px: f64, tape_m: f64, rng: &mut Rng) -> Vec<Reference> {
+    s.world
+        .iter()
+        .enumerate()
+        .map(|(i, w)| {
+            let p = s.truth.world_to_pixel(w).unwrap();
+            let d = Vector3::new(rng.normal(), rng.normal(), rng.normal()) * tape_m;
+            Reference {
+                name: format!("ref{}", i + 1),
+                line: i + 2,
+                world: WorldPoint(w.0 + d),
+                pixel: Pixel::new(p.u + click_px * rng.normal(), p.v + click_px * rng.normal()),
+            }
+        })
+        .collect()
+}
+
+/// Moves one reference's measured position by 0.3 m across its line of sight (a random direction
+/// perpendicular to it); returns which.
+fn move_one(s: &Scene, refs: &mut [Reference], rng: &mut Rng) -> usize {
+    let i = ((rng.uniform() * refs.len() as f64) as usize).min(refs.len() - 1);
+    let ray = s.world[i].0 - s.truth.pose.camera_center().0;
+    let across = ray.cross(&Vector3::new(rng.normal(), rng.normal(), rng.normal())).normalize();
+    refs[i].world = WorldPoint(refs[i].world.0 + across * 0.3);
+    i
+}
+
+/// What the solve did over a set of random cameras.
+#[derive(Default)]
+struct Tally {
+    /// Camera centre and orientation errors of the accepted good sets, cm and degrees.
+    centre_cm: Vec<f64>,
+    angle_deg: Vec<f64>,
+    /// Good sets refused as inconsistent (a reference named, or over the limit).
+    false_rejections: Vec<String>,
+    /// Good sets with no solution for another reason.
+    unsolved: Vec<String>,
+    /// Per camera: with one reference moved 0.3 m, was that reference named.
+    named: Vec<bool>,
+    misses: Vec<String>,
+}
+
+/// `cameras` random cameras (camera k has `counts[k % counts.len()]` references), each solved from
+/// its references measured with the given noise (stated as that noise), then with one of them
+/// moved by 0.3 m.
+fn trials(cameras: usize, counts: &[usize], click_px: f64, tape_m: f64, known: bool) -> Tally {
+    let mut t = Tally::default();
+    for c in 0..cameras {
+        let n = counts[c % counts.len()];
+        let s = scene(c as u64, n);
+        let mut rng = Rng::derive(c as u64, 0x0e55);
+        let opts = Options { max_rms_px: 3.0, click_px, tape_m, width: s.width, height: s.height };
+        let k = known.then_some(s.truth.intrinsics);
+        let good = measure(&s, click_px, tape_m, &mut rng);
+        match calib::calibrate(&good, k.as_ref(), &opts) {
+            Ok(sol) => {
+                t.centre_cm.push(sol.camera.pose.camera_center().distance(&s.truth.pose.camera_center()).get() * 100.0);
+                t.angle_deg.push(calib::rotation_angle_deg(&sol.camera.pose.rotation, &s.truth.pose.rotation));
+            }
+            Err(e @ (CalibError::Outlier { .. } | CalibError::OverLimit { .. })) => {
+                t.false_rejections.push(format!("camera {c} ({n} references): {e}"))
+            }
+            Err(e) => t.unsolved.push(format!("camera {c} ({n} references): {e}")),
+        }
+        let mut bad = good;
+        let i = move_one(&s, &mut bad, &mut rng);
+        match calib::calibrate(&bad, k.as_ref(), &opts) {
+            Err(CalibError::Outlier { label, .. }) if label.contains(&format!("'{}'", bad[i].name)) => {
+                t.named.push(true)
+            }
+            other => {
+                t.named.push(false);
+                t.misses.push(format!(
+                    "camera {c} ({n} references), {} moved: {}",
+                    bad[i].name,
+                    other.map_or_else(|e| e.to_string(), |s| format!("accepted at {:.2} px RMS", s.rms_px))
+                ))
+            }
+        }
+    }
+    t
+}
+
+fn max(v: &[f64]) -> f64 {
+    v.iter().copied().fold(0.0, f64::max)
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    percentile(&mut v, 0.5)
+}
+
+/// Realistic noise (1 px clicks, 1 cm tape, stated as such) over 50 random cage cameras with 6, 8
+/// or 10 references: no good reference is refused, and a reference moved by 0.3 m is named in at
+/// least 95% of the cameras where the leave-one-out test can run (five references with intrinsics;
+/// without, in 95% of those with ten and 80% of those with eight: with fewer, the estimated focal
+/// length and principal point absorb part of the move). The pose error is bounded by the
+/// measurement noise, not by the consensus step; the bounds here are the medians of
+/// docs/calibration.md's table with a margin, and a worst case with intrinsics.
+#[test]
+fn realistic_noise_refuses_no_good_reference_and_names_a_moved_one() {
+    for known in [true, false] {
+        let counts = [6, 8, 10];
+        let t = trials(50, &counts, 1.0, 0.01, known);
+        let what = if known { "intrinsics known" } else { "intrinsics estimated" };
+        println!(
+            "{what}: {} of 50 solved, centre median {:.2} max {:.2} cm, orientation median {:.3} max {:.3} deg; moved \
+             reference named in {} of 50",
+            t.centre_cm.len(),
+            median(&t.centre_cm),
+            max(&t.centre_cm),
+            median(&t.angle_deg),
+            max(&t.angle_deg),
+            t.named.iter().filter(|&&x| x).count()
+        );
+        for m in &t.misses {
+            println!("  not named: {m}");
+        }
+        assert!(t.false_rejections.is_empty(), "{what}: good references refused: {:#?}", t.false_rejections);
+        assert!(t.unsolved.is_empty(), "{what}: {:#?}", t.unsolved);
+        let named_of = |n: usize| {
+            let cams: Vec<usize> = (0..50).filter(|c| counts[c % 3] == n).collect();
+            (cams.iter().filter(|&&c| t.named[c]).count(), cams.len())
+        };
+        let need = calib::consensus::min_references(!known);
+        for n in counts.into_iter().filter(|&n| n >= need) {
+            let (named, of) = named_of(n);
+            let pct = if known || n >= 10 { 95 } else { 80 };
+            assert!(named * 100 >= pct * of, "{what}, {n} references: moved one named in {named} of {of}");
+        }
+        let (c, a) = (median(&t.centre_cm), median(&t.angle_deg));
+        if known {
+            assert!(c < 5.0 && a < 1.0 && max(&t.centre_cm) < 20.0 && max(&t.angle_deg) < 2.0, "{what}");
+        } else {
+            assert!(c < 10.0 && a < 3.0, "{what}: median {c:.2} cm, {a:.3} deg");
+        }
+    }
+}
+
+/// The accuracy table of docs/calibration.md (not a check; run it in release, it takes minutes):
+/// `cargo test --release --test calibrate accuracy_table -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn accuracy_table() {
+    println!(
+        "| click px | tape cm | intrinsics | refs | centre error median / p95 / max cm | orientation median / p95 / \
+         max deg | good sets refused | moved 0.3 m named |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for click in [0.5, 1.0, 2.0] {
+        for tape in [0.01, 0.03] {
+            for known in [true, false] {
+                for n in [6, 8, 10] {
+                    let t = trials(50, &[n], click, tape, known);
+                    let (mut c, mut a) = (t.centre_cm.clone(), t.angle_deg.clone());
+                    let stats = |v: &mut Vec<f64>, p: usize| {
+                        if v.is_empty() {
+                            return "-".to_string();
+                        }
+                        let m = max(v);
+                        format!("{:.*} / {:.*} / {m:.p$}", p, percentile(v, 0.5), p, percentile(v, 0.95))
+                    };
+                    println!(
+                        "| {click} | {} | {} | {n} | {} | {} | {} of 50{} | {} of 50 |",
+                        tape * 100.0,
+                        if known { "known" } else { "estimated" },
+                        stats(&mut c, 1),
+                        stats(&mut a, 2),
+                        t.false_rejections.len(),
+                        if t.unsolved.is_empty() { String::new() } else { format!(" ({} unsolved)", t.unsolved.len()) },
+                        t.named.iter().filter(|&&x| x).count(),
+                    );
+                    for f in t.false_rejections.iter().chain(&t.unsolved) {
+                        eprintln!("  {f}");
+                    }
+                }
+            }
+        }
+    }
 }

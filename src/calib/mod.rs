@@ -4,13 +4,18 @@
 //! reads (docs/calibration.md), with the reference objects the metric depth fit uses (paper eq. 1-2).
 //!
 //! Method (see [`pnp`]): a linear start (normalised DLT for six or more non-coplanar references, a
-//! plane homography otherwise, with sampled rotations as a fallback), Levenberg-Marquardt on the reprojection error in pixels, then a
-//! leave-one-out consensus step: each reference is predicted by the pose solved from all the others;
-//! a reference whose prediction misses by more than twice the error limit while the others fit is
-//! named as mis-measured. This is the single-outlier case of RANSAC's consensus test (Fischler &
-//! Bolles, CACM 1981) with every leave-one-out set as a candidate.
+//! plane homography otherwise, with sampled rotations as a fallback), Levenberg-Marquardt on the
+//! reprojection error in pixels, then a leave-one-out consensus step ([`consensus`]): each
+//! reference is predicted by the camera solved from all the others, and one whose miss is more
+//! sigmas off than the stated measurement noise (`--click-px`, `--tape-m`) allows, carried through
+//! that camera's uncertainty, is named as mis-measured while the others fit. This is the
+//! single-outlier case of RANSAC's consensus test (Fischler & Bolles, CACM 1981) with every
+//! leave-one-out set as a candidate and a chi-square test in place of a fixed pixel threshold.
 
+pub mod consensus;
 pub mod pnp;
+
+pub use consensus::consensus;
 
 use crate::geometry::{Camera, Intrinsics, Pixel, WorldPoint};
 use nalgebra::Vector3;
@@ -67,21 +72,28 @@ pub enum CalibError {
     Degenerate(String),
     /// One reference does not fit the others.
     #[error(
-        "{label} does not fit the others: the pose solved from the other references puts it {error_px:.1} px \
-         from where it was marked (the others fit to {others_rms_px:.2} px RMS); re-measure its position and \
-         pixel, or drop it"
+        "{label} does not fit the others: the camera solved from the other references puts it {error_px:.1} px \
+         from where it was marked, {sigmas:.1} sigma of the stated measurement noise (1 sigma = {sigma_px:.2} px \
+         in that direction; the others fit to {others_rms_px:.2} px RMS); re-measure its position and pixel, or \
+         drop it"
     )]
     Outlier {
         /// The reference (`reference 'name' (line N)`).
         label: String,
         /// Its leave-one-out prediction error, pixels.
         error_px: f64,
+        /// That error in standard deviations (Mahalanobis distance) of its predicted position under
+        /// the stated noise.
+        sigmas: f64,
+        /// One standard deviation of the prediction along the miss, pixels.
+        sigma_px: f64,
         /// RMS error of the others under their own solution, pixels.
         others_rms_px: f64,
     },
     /// The fit is worse than the limit (and no single reference explains it).
     #[error(
-        "reprojection error {rms_px:.2} px RMS is over the limit of {limit_px} px (--max-rms); worst: {worst} at \
+        "reprojection error {rms_px:.2} px RMS is over the limit of {limit_px} px (--max-rms) and more than the \
+         stated measurement noise explains (--click-px {click_px}, --tape-m {tape_m}); worst: {worst} at \
          {worst_px:.1} px. Check the intrinsics (underwater behind a flat port the focal length is about 1.33x \
          the in-air value) and the measurements"
     )]
@@ -90,6 +102,10 @@ pub enum CalibError {
         rms_px: f64,
         /// The limit, pixels.
         limit_px: f64,
+        /// The stated click noise, pixels per axis.
+        click_px: f64,
+        /// The stated tape noise, metres per axis.
+        tape_m: f64,
         /// The reference with the largest error.
         worst: String,
         /// Its error, pixels.
@@ -157,8 +173,12 @@ pub fn parse_points(text: &str) -> Result<Vec<Reference>, CalibError> {
 /// Settings of a solve.
 #[derive(Debug, Clone, Copy)]
 pub struct Options {
-    /// Largest acceptable RMS reprojection error, pixels.
+    /// Largest acceptable RMS reprojection error, pixels, unless the stated noise explains it.
     pub max_rms_px: f64,
+    /// Expected error of a marked pixel, pixels per axis (standard deviation).
+    pub click_px: f64,
+    /// Expected error of a measured face centre, metres per axis (standard deviation).
+    pub tape_m: f64,
     /// Image size in pixels (pixels outside it are rejected; the principal point starts at its centre).
     pub width: u32,
     /// Image height, pixels.
@@ -325,7 +345,8 @@ fn solve_once(refs: &[Reference], intrinsics: Option<&Intrinsics>) -> Result<Sol
 }
 
 /// Solves the calibration: checks the geometry, solves, runs the consensus step and checks the
-/// error limit. `intrinsics`: known intrinsics (only the pose is solved), or `None` to estimate
+/// error limit (a fit over `max_rms_px` is refused only when the stated noise does not explain it:
+/// its weighted residual sum is over [`consensus::fit_limit`]). `intrinsics`: known intrinsics (only the pose is solved), or `None` to estimate
 /// `fx = fy`, `cx`, `cy` as well (six or more non-coplanar references).
 pub fn calibrate(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Options) -> Result<Solution, CalibError> {
     check_geometry(refs, opts)?;
@@ -333,7 +354,8 @@ pub fn calibrate(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Opt
     if let Some(e) = consensus(refs, &sol, opts) {
         return Err(e);
     }
-    if sol.rms_px.is_nan() || sol.rms_px > opts.max_rms_px {
+    let (chi2, dof) = consensus::fit_chi2(&sol.camera, refs, sol.estimated_intrinsics, opts);
+    if sol.rms_px.is_nan() || (sol.rms_px > opts.max_rms_px && (chi2.is_nan() || chi2 > consensus::fit_limit(dof))) {
         let (i, worst) = sol
             .residuals
             .iter()
@@ -344,36 +366,13 @@ pub fn calibrate(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Opt
         return Err(CalibError::OverLimit {
             rms_px: sol.rms_px,
             limit_px: opts.max_rms_px,
+            click_px: opts.click_px,
+            tape_m: opts.tape_m,
             worst: refs.get(i).map(Reference::label).unwrap_or_default(),
             worst_px: worst,
         });
     }
     Ok(sol)
-}
-
-/// Leave-one-out consensus: each reference predicted by the camera refined (from the full
-/// solution) on all the others. Returns the worst reference when its prediction misses by more than
-/// twice the limit while the others fit within the limit. Needs one more reference than the solve
-/// (five with intrinsics, seven without); with fewer, nothing can be named.
-pub fn consensus(refs: &[Reference], sol: &Solution, opts: &Options) -> Option<CalibError> {
-    let need = if sol.estimated_intrinsics { 7 } else { 5 };
-    if refs.len() < need {
-        return None;
-    }
-    let mut worst: Option<(usize, f64, f64)> = None;
-    for i in 0..refs.len() {
-        let others: Vec<Reference> = refs.iter().enumerate().filter(|&(j, _)| j != i).map(|(_, r)| r.clone()).collect();
-        let w: Vec<Vector3<f64>> = others.iter().map(|r| r.world.0).collect();
-        let px: Vec<Pixel> = others.iter().map(|r| r.pixel).collect();
-        let cam = pnp::refine(&sol.camera, &w, &px, sol.estimated_intrinsics);
-        let (_, rms_others) = residuals(&cam, &others);
-        let (mine, _) = residuals(&cam, std::slice::from_ref(&refs[i]));
-        let e = mine[0].error_px;
-        if e > 2.0 * opts.max_rms_px && rms_others <= opts.max_rms_px && worst.is_none_or(|(_, we, _)| e > we) {
-            worst = Some((i, e, rms_others));
-        }
-    }
-    worst.map(|(i, error_px, others_rms_px)| CalibError::Outlier { label: refs[i].label(), error_px, others_rms_px })
 }
 
 /// Angle between two rotations, degrees.

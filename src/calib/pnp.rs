@@ -288,11 +288,55 @@ fn apply(cam: &Camera, d: &[f64]) -> Camera {
     Camera { intrinsics: k, pose: Pose { rotation: r, translation: t } }
 }
 
+/// The number of camera parameters [`refine`] adjusts: the pose (6), plus `fx = fy`, `cx`, `cy`.
+pub fn parameter_count(estimate_k: bool) -> usize {
+    if estimate_k { 9 } else { 6 }
+}
+
+/// d pixel / d camera parameters (rows u then v per point; columns as [`refine`]'s increments:
+/// rotation, translation, then `f`, `cx`, `cy` with `estimate_k`) by central differences. `None`
+/// when a point is at or behind the camera.
+pub fn parameter_jacobian(cam: &Camera, world: &[Vector3<f64>], estimate_k: bool) -> Option<DMatrix<f64>> {
+    let np = parameter_count(estimate_k);
+    let mut j = DMatrix::zeros(2 * world.len(), np);
+    for k in 0..np {
+        let h = if k < 6 { 1e-6 } else { 1e-4 };
+        let mut d = [0.0; 9];
+        d[k] = h;
+        let plus = apply(cam, &d[..np]);
+        d[k] = -h;
+        let minus = apply(cam, &d[..np]);
+        for (i, w) in world.iter().enumerate() {
+            let p = plus.world_to_pixel(&crate::geometry::WorldPoint(*w)).ok()?;
+            let m = minus.world_to_pixel(&crate::geometry::WorldPoint(*w)).ok()?;
+            j[(2 * i, k)] = (p.u - m.u) / (2.0 * h);
+            j[(2 * i + 1, k)] = (p.v - m.v) / (2.0 * h);
+        }
+    }
+    Some(j)
+}
+
+/// d pixel / d world point (2x3) by central differences (1 mm steps); `None` when the point is at
+/// or behind the camera.
+pub fn world_jacobian(cam: &Camera, world: &Vector3<f64>) -> Option<nalgebra::Matrix2x3<f64>> {
+    let h = 1e-3;
+    let mut j = nalgebra::Matrix2x3::zeros();
+    for k in 0..3 {
+        let mut d = Vector3::zeros();
+        d[k] = h;
+        let p = cam.world_to_pixel(&crate::geometry::WorldPoint(world + d)).ok()?;
+        let m = cam.world_to_pixel(&crate::geometry::WorldPoint(world - d)).ok()?;
+        j[(0, k)] = (p.u - m.u) / (2.0 * h);
+        j[(1, k)] = (p.v - m.v) / (2.0 * h);
+    }
+    Some(j)
+}
+
 /// Levenberg-Marquardt on the reprojection error in pixels. `estimate_k`: also refine `fx = fy`,
 /// `cx`, `cy` (needs six or more non-coplanar points to be determined). Returns the refined camera
 /// (the rotation re-orthonormalised).
 pub fn refine(start: &Camera, world: &[Vector3<f64>], px: &[Pixel], estimate_k: bool) -> Camera {
-    let np = if estimate_k { 9 } else { 6 };
+    let np = parameter_count(estimate_k);
     let nr = 2 * world.len();
     let mut cam = *start;
     let mut r = DVector::zeros(nr);

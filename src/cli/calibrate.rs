@@ -62,9 +62,19 @@ pub struct CalibrateArgs {
     /// their reprojection error is within --max-rms, exit 1 when the camera (or a reference) moved.
     #[arg(long, value_name = "CALIB", conflicts_with_all = ["intrinsics", "fx"])]
     pub check: Option<PathBuf>,
-    /// Largest acceptable RMS reprojection error, pixels.
+    /// Largest acceptable RMS reprojection error, pixels. A fit over it is still accepted when the
+    /// stated measurement noise (--click-px, --tape-m) explains it.
     #[arg(long, default_value_t = 3.0, value_name = "PX")]
     pub max_rms: f64,
+    /// Expected error of a marked pixel, pixels per axis (one standard deviation): how carefully
+    /// the references were clicked. With --tape-m it sets how far a reference may miss the camera
+    /// solved from the others before it is named as mis-measured.
+    #[arg(long, default_value_t = 1.5, value_name = "PX")]
+    pub click_px: f64,
+    /// Expected error of a measured face centre, metres per axis (one standard deviation): how
+    /// carefully the references were measured.
+    #[arg(long, default_value_t = 0.01, value_name = "M")]
+    pub tape_m: f64,
     /// Edge length of the reference cubes, metres, written as `size_m` (their centre is put half an
     /// edge behind the measured face, away from the camera). 0: points, not cubes.
     #[arg(long, default_value_t = 0.0, value_name = "M")]
@@ -95,6 +105,8 @@ struct CalibrateInfo {
     names: Vec<String>,
     rms_px: f64,
     max_rms_px: f64,
+    click_px: f64,
+    tape_m: f64,
     error_px: Vec<f64>,
     estimated_intrinsics: bool,
 }
@@ -137,6 +149,12 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     if !(args.max_rms.is_finite() && args.max_rms > 0.0) {
         return Err(usage(format!("--max-rms must be a positive number of pixels, got {}", args.max_rms)));
     }
+    if !(args.click_px.is_finite() && args.click_px > 0.0) {
+        return Err(usage(format!("--click-px must be a positive number of pixels, got {}", args.click_px)));
+    }
+    if !(args.tape_m.is_finite() && args.tape_m > 0.0) {
+        return Err(usage(format!("--tape-m must be a positive length in metres, got {}", args.tape_m)));
+    }
     if !(args.ref_size.is_finite() && args.ref_size >= 0.0) {
         return Err(usage(format!("--ref-size must be 0 or a positive length in metres, got {}", args.ref_size)));
     }
@@ -154,7 +172,13 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
         ));
     };
     let refs = read_points(points)?;
-    let opts = Options { max_rms_px: args.max_rms, width: frame.width(), height: frame.height() };
+    let opts = Options {
+        max_rms_px: args.max_rms,
+        click_px: args.click_px,
+        tape_m: args.tape_m,
+        width: frame.width(),
+        height: frame.height(),
+    };
     if let Some(calib_path) = &args.check {
         return check(calib_path, &refs, &opts, &frame, args.overlay.as_deref());
     }
@@ -197,6 +221,8 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
             names: refs.iter().map(|r| r.name.clone()).collect(),
             rms_px: sol.rms_px,
             max_rms_px: args.max_rms,
+            click_px: args.click_px,
+            tape_m: args.tape_m,
             error_px: sol.residuals.iter().map(|r| r.error_px).collect(),
             estimated_intrinsics: sol.estimated_intrinsics,
         },
