@@ -349,6 +349,9 @@ pub struct Shared {
     pub history: HistoryStatus,
     /// The Prometheus endpoint's state and counters.
     pub metrics: MetricsStatus,
+    /// The Modbus role's state for the console's `status` (set once at start: the role, where it
+    /// serves, and whether it is open to every address); unset = off.
+    pub modbus: OnceLock<String>,
 }
 
 impl Shared {
@@ -363,6 +366,7 @@ impl Shared {
             stopping: AtomicBool::new(false),
             history: HistoryStatus::default(),
             metrics: MetricsStatus::default(),
+            modbus: OnceLock::new(),
         }
     }
 
