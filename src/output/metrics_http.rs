@@ -599,7 +599,12 @@ mod tests {
     }
 
     fn limits(max_connections: usize, max_per_peer: usize) -> HttpLimits {
-        HttpLimits { max_connections, max_per_peer, header_timeout: Duration::from_secs(5), allow: AllowList::default() }
+        HttpLimits {
+            max_connections,
+            max_per_peer,
+            header_timeout: Duration::from_secs(5),
+            allow: AllowList::default(),
+        }
     }
 
     /// Whether a scrape from `ip` is answered 200.

@@ -307,7 +307,8 @@ pub struct MetricsStatus {
     state: OnceLock<String>,
     /// Responses sent, by status code, in the order of [`MetricsStatus::CODES`].
     pub responses: [AtomicU64; 6],
-    /// Connections closed at accept: over the connection limit, or not in `output.metrics.allow`.
+    /// Connections closed at accept (over a connection limit, or not in `output.metrics.allow`),
+    /// or closed before their request head was complete to make room for a steady scraper.
     pub refused: AtomicU64,
     /// Connections that ended before a complete request arrived (closed or reset by the peer).
     pub aborted: AtomicU64,
