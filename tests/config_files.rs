@@ -101,6 +101,30 @@ fn board_profiles_are_valid_configs() {
     assert!(n >= 4, "at least four board profiles, found {n}");
 }
 
+/// `fme config check` warns, without failing, while a server listening beyond loopback has an
+/// empty allow list (the board profiles ship it empty for the installer to fill in).
+#[test]
+fn config_check_warns_about_servers_open_to_every_address() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let check = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).expect("write");
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_fme"))
+            .args(["config", "check"])
+            .arg(&p)
+            .output()
+            .expect("run fme");
+        assert!(out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let open = check("open.toml", "[output.modbus]\nlisten = \"0.0.0.0:502\"\nallow = []\n");
+    assert!(open.contains("warning: key `output.modbus.allow`"), "{open}");
+    let listed = check("listed.toml", "[output.modbus]\nlisten = \"0.0.0.0:502\"\nallow = [\"192.168.1.20\"]\n");
+    assert!(!listed.contains("warning"), "{listed}");
+    let local = check("local.toml", "[output.metrics]\nlisten = \"127.0.0.1:9464\"\n");
+    assert!(!local.contains("warning"), "{local}");
+}
+
 /// `fme config check`: the shipped file passes; each broken file exits 2 with a message naming the
 /// file, the line and the key, also inside inline tables and dotted keys.
 #[test]

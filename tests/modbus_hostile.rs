@@ -1,7 +1,8 @@
 //! The Modbus TCP server on a hostile LAN: a PLC polling every second keeps every poll while 20
-//! idle connections a second are opened against it; connections that never had a request answered
-//! are closed before a working one; the allow list closes other addresses at accept; a peer
-//! trickling bytes that never complete a request is closed at the idle timeout.
+//! idle connections a second are opened against it, and a PLC polling steadily keeps every poll
+//! while clients from four addresses open polling connections every 100 ms; connections that never
+//! had a request answered are closed before a working one; the allow list closes other addresses at
+//! accept; a peer trickling bytes that never complete a request is closed at the idle timeout.
 
 use fme::config::allow::AllowList;
 use fme::output::bank::RegisterBank;
@@ -80,6 +81,75 @@ async fn a_polling_plc_survives_20_idle_connections_a_second() {
     assert!(c.tcp_evicted >= 90, "the flood was evicted, not the PLC: {c:?}");
     assert!(c.tcp_open <= 8, "{c:?}");
     drop(held);
+}
+
+/// One busy host: every 100 ms a new connection that polls every 20 ms until the server closes it;
+/// at most 4 open at once (the oldest is dropped for a new one).
+async fn busy_host(from: &'static str, addr: SocketAddr, stop: tokio::sync::watch::Receiver<bool>) {
+    let mut open: std::collections::VecDeque<tokio::task::JoinHandle<()>> = std::collections::VecDeque::new();
+    while !*stop.borrow() {
+        if open.len() >= 4
+            && let Some(oldest) = open.pop_front()
+        {
+            oldest.abort();
+        }
+        let s = connect_from(from, addr).await;
+        let mut stop = stop.clone();
+        open.push_back(tokio::spawn(async move {
+            let mut ctx = tcp::attach_slave(s, Slave(1));
+            while !*stop.borrow() && poll_ok(&mut ctx).await {
+                tokio::select! {
+                    _ = tokio::time::sleep(Duration::from_millis(20)) => {},
+                    _ = stop.changed() => {},
+                }
+            }
+        }));
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    for t in open {
+        t.abort();
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_steadily_polling_plc_keeps_its_slot_against_busy_clients_from_four_addresses() {
+    let limits = TcpLimits { priority_after: Some(Duration::from_millis(600)), ..TcpLimits::default() };
+    let (bank, addr, _stop) = start(limits).await;
+    // The PLC (127.0.0.1) polls every 200 ms; like a real PLC it reconnects after a lost poll.
+    let mut plc = tcp::connect_slave(addr, Slave(1)).await.expect("plc connects");
+    for _ in 0..5 {
+        assert!(poll_ok(&mut plc).await, "polls before the crowd");
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let hosts: Vec<_> = ["127.0.0.2", "127.0.0.3", "127.0.0.4", "127.0.0.5"]
+        .into_iter()
+        .map(|h| tokio::spawn(busy_host(h, addr, stop_rx.clone())))
+        .collect();
+    // No pause here: a gap in the PLC's polls longer than `priority_after` would end its priority.
+    // 40 connections a second fill the 7 other slots within the first poll or two.
+    let mut lost = 0;
+    for _ in 0..20 {
+        if !poll_ok(&mut plc).await {
+            lost += 1;
+            if let Ok(Ok(c)) = tokio::time::timeout(Duration::from_secs(2), tcp::connect_slave(addr, Slave(1))).await {
+                plc = c;
+            }
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    let _ = stop_tx.send(true);
+    for h in hosts {
+        let _ = h.await;
+    }
+    let c = bank.counters();
+    eprintln!(
+        "crowd: 20 PLC polls 200 ms apart, {lost} lost; busy clients: {} requests, {} evicted, {} refused",
+        c.requests, c.tcp_evicted, c.tcp_refused
+    );
+    assert_eq!(lost, 0, "no PLC poll may be lost: {c:?}");
+    assert!(c.requests > 200, "the busy clients really polled: {c:?}");
+    assert!(c.tcp_evicted + c.tcp_refused > 20, "the server really was full: {c:?}");
 }
 
 #[tokio::test]

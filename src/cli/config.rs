@@ -43,6 +43,10 @@ pub fn run(args: ConfigCmdArgs) -> anyhow::Result<()> {
             // The files it names, so that `fme run` with this file cannot stop at start for one.
             crate::config::files::check(&cfg)
                 .map_err(|(key, message)| super::UsageError(format!("{}: key `{key}`: {message}", file.display())))?;
+            // Warnings do not fail the check: a lab box may serve everyone on purpose.
+            for (key, message) in cfg.warnings() {
+                eprintln!("{}: warning: key `{key}`: {message}", file.display());
+            }
             super::write_stdout(&format!("{}: ok\n", file.display()))
         }
         Action::Show { file, config, set } => {

@@ -50,6 +50,21 @@ fn mask_eq(a: u128, b: u128, bits: u32, prefix: u8) -> bool {
     shift >= bits || (a >> shift) == (b >> shift)
 }
 
+/// Whether a server listening on `listen` (HOST:PORT) with the allow list `allow` accepts every
+/// address that can reach it: `allow` empty and `listen` not a loopback address. A host name other
+/// than `localhost` counts as reachable from the network.
+pub fn open_to_all(listen: &str, allow: &[String]) -> bool {
+    if !allow.is_empty() || listen.is_empty() {
+        return false;
+    }
+    let host = listen.rsplit_once(':').map_or(listen, |(h, _)| h);
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    match host.parse::<IpAddr>() {
+        Ok(ip) => !ip.to_canonical().is_loopback(),
+        Err(_) => !host.eq_ignore_ascii_case("localhost"),
+    }
+}
+
 /// The allow list; empty allows everyone.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct AllowList(pub Vec<IpRange>);
@@ -93,6 +108,17 @@ mod tests {
         assert!(AllowList::parse(&["0.0.0.0/0".into()]).expect("valid").permits(ip("8.8.8.8")));
         for bad in ["192.168.1.0/33", "plc.local", "300.1.1.1", "10.0.0.1/x", ""] {
             assert!(AllowList::parse(&[bad.into()]).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn open_to_all_only_off_loopback_without_a_list() {
+        for open in ["0.0.0.0:502", "192.168.1.5:502", "[::]:9464", "box.local:502"] {
+            assert!(open_to_all(open, &[]), "{open}");
+            assert!(!open_to_all(open, &["192.168.1.20".into()]), "{open} with a list");
+        }
+        for closed in ["127.0.0.1:5020", "[::1]:9464", "localhost:9464", ""] {
+            assert!(!open_to_all(closed, &[]), "{closed}");
         }
     }
 }

@@ -241,6 +241,38 @@ impl Config {
     }
 }
 
+impl Config {
+    /// What `fme config check` warns about without failing, as (dotted key, message): a TCP server
+    /// (Modbus, metrics) open to every address on the network (allow list empty, listen address
+    /// not loopback).
+    pub fn warnings(&self) -> Vec<(String, String)> {
+        let mut out = Vec::new();
+        let m = &self.output.modbus;
+        if m.mode == ModbusMode::TcpServer && allow::open_to_all(&m.listen, &m.allow) {
+            out.push((
+                "output.modbus.allow".to_string(),
+                format!(
+                    "empty while output.modbus.listen is {:?}: every host on the network may read the registers and \
+                     write HR 100-103; list the PLC's address (and any HMI/SCADA poller), e.g. [\"192.168.1.20\"]",
+                    m.listen
+                ),
+            ));
+        }
+        let mx = &self.output.metrics;
+        if allow::open_to_all(&mx.listen, &mx.allow) {
+            out.push((
+                "output.metrics.allow".to_string(),
+                format!(
+                    "empty while output.metrics.listen is {:?}: every host on the network may scrape; list the \
+                     Prometheus server's address, e.g. [\"192.168.1.30\"]",
+                    mx.listen
+                ),
+            ));
+        }
+        out
+    }
+}
+
 /// Whether `s` may be one level of an MQTT topic: no `/`, no wildcards `+` `#`, no spaces or
 /// control characters, at most 64 bytes (empty is allowed here; callers decide).
 pub fn valid_topic_level(s: &str) -> bool {
@@ -381,6 +413,17 @@ mod tests {
             let e = parse(&format!("[output.modbus]\nmax_connections = {bad}\n")).err();
             assert_eq!(e.as_ref().and_then(|e| e.key()), Some("output.modbus.max_connections"), "{bad}: {e:?}");
         }
+    }
+
+    #[test]
+    fn open_servers_are_warned_about() {
+        let c = parse("[output.modbus]\nlisten = \"0.0.0.0:502\"\n[output.metrics]\nlisten = \"0.0.0.0:9464\"\n")
+            .expect("valid");
+        let keys: Vec<String> = c.warnings().into_iter().map(|w| w.0).collect();
+        assert_eq!(keys, ["output.modbus.allow", "output.metrics.allow"]);
+        let c = parse("[output.modbus]\nlisten = \"0.0.0.0:502\"\nallow = [\"10.0.0.5\"]\n").expect("valid");
+        assert!(c.warnings().is_empty(), "{:?}", c.warnings());
+        assert!(Config::default().warnings().is_empty(), "the defaults listen on loopback only");
     }
 
     #[test]

@@ -284,6 +284,11 @@ pub struct ModbusConfig {
     /// TCP server: close a connection with no complete request for this long, ms (0 = never);
     /// keep it well above the PLC's poll interval.
     pub idle_timeout_ms: u64,
+    /// TCP server: a connection whose requests have been answered for this long, no two more than
+    /// this apart (a PLC polling steadily), has priority: it is never closed for a newcomer, which
+    /// is refused instead when no other connection can make room, ms (0 = no priority). Keep it
+    /// above the PLC's poll interval.
+    pub priority_after_ms: u64,
     /// TCP server: addresses or CIDR ranges allowed to connect (`["192.168.1.0/24"]`); empty =
     /// everyone. Others are closed at accept and counted (console `counters`).
     pub allow: Vec<String>,
@@ -308,6 +313,7 @@ impl Default for ModbusConfig {
             max_connections: 8,
             max_connections_per_peer: 4,
             idle_timeout_ms: 60_000,
+            priority_after_ms: 10_000,
             allow: Vec::new(),
         }
     }
@@ -332,7 +338,7 @@ impl Default for SerialLineConfig {
 }
 
 /// `[output.metrics]`: a Prometheus endpoint (`GET /metrics`, text format 0.0.4; `docs/metrics.md`).
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct MetricsConfig {
     /// Address to serve on, HOST:PORT (e.g. `"127.0.0.1:9464"`); empty = off (default).
@@ -340,6 +346,25 @@ pub struct MetricsConfig {
     /// Addresses or CIDR ranges allowed to connect (`["192.168.1.0/24"]`); empty = everyone. Others
     /// are closed at accept and counted.
     pub allow: Vec<String>,
+    /// Connections served at once; more are refused, except that a steady scraper's new connection
+    /// closes the oldest one still sending its request head.
+    pub max_connections: u32,
+    /// Connections served at once from one IP address (at most `max_connections`); more are refused.
+    pub max_connections_per_peer: u32,
+    /// A request head not complete within this long is answered 408 and the connection closed, ms.
+    pub header_timeout_ms: u64,
+}
+
+impl Default for MetricsConfig {
+    fn default() -> Self {
+        Self {
+            listen: String::new(),
+            allow: Vec::new(),
+            max_connections: 32,
+            max_connections_per_peer: 2,
+            header_timeout_ms: 2000,
+        }
+    }
 }
 
 /// `[console]`.

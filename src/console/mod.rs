@@ -278,7 +278,7 @@ last {}",
                 let h = shared.health();
                 let _ = write!(
                     body,
-                    "state {}\nstatus 0x{:04x} {}\nfault {} ({}{})\nsource {}\nuptime {} s\nfeeding-recommended {}\ndetections {}\nhistory {}\nmetrics {}",
+                    "state {}\nstatus 0x{:04x} {}\nfault {} ({}{})\nsource {}\nuptime {} s\nfeeding-recommended {}\ndetections {}\nhistory {}\nmodbus {}\nmetrics {}",
                     if shared.stopping() { "stopping" } else { "running" },
                     r[10],
                     status::words(r[10]),
@@ -290,6 +290,7 @@ last {}",
                     r[17],
                     h.stage.familiarity.describe(),
                     shared.history.describe(),
+                    shared.modbus.get().map_or("off", String::as_str),
                     shared.metrics.describe()
                 );
                 Ok(())

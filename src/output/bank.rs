@@ -54,7 +54,8 @@ pub struct ModbusCounters {
     pub tcp_evicted: u64,
     /// TCP server: failed accepts (each retried after a pause).
     pub tcp_accept_errors: u64,
-    /// TCP server: connections closed at accept because the peer is not in `output.modbus.allow`.
+    /// TCP server: connections closed at accept because the peer is not in `output.modbus.allow`,
+    /// or because every connection that could make room for it has priority.
     pub tcp_refused: u64,
     /// TCP server: connections closed on a frame that cannot be framed (bad MBAP header).
     pub tcp_bad_frames: u64,

@@ -1,5 +1,5 @@
 //! Outputs to the farm: register map, Modbus TCP/RTU server and client, serial line, feeding rule,
-//! MQTT telemetry ([`mqtt`], docs/mqtt.md) and the Prometheus endpoint ([`metrics`]).
+//! MQTT telemetry ([`mqtt`], docs/mqtt.md) and the Prometheus endpoint ([`metrics`], served by [`metrics_http`]).
 //!
 //! The register map ([`registers`]) and the feeding rule ([`feeding`]) are pure and tested without
 //! I/O; [`modbus`] and the serial line are the I/O edges around the shared [`bank::RegisterBank`].
@@ -9,6 +9,7 @@ pub mod feeding;
 pub mod listen_hint;
 pub mod log_throttle;
 pub mod metrics;
+pub mod metrics_http;
 pub mod modbus;
 pub mod modbus_guard;
 pub mod mqtt;

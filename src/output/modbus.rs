@@ -129,7 +129,7 @@ pub async fn bind_tcp(listen: &str) -> Result<(tokio::net::TcpListener, SocketAd
 }
 
 /// Serves Modbus TCP on `listener` until `shutdown` resolves, within `limits` (allow list,
-/// connection limits, idle timeout: [`super::tcp_conns`]).
+/// connection limits, priority connections, idle timeout: [`super::tcp_conns`]).
 ///
 /// Framing and request decoding are this crate's own ([`super::modbus_guard`]): malformed
 /// requests get exception 03 and never reach tokio-modbus's decoder (upstream issue 298). Each
@@ -172,7 +172,10 @@ pub async fn serve_tcp(
                         continue;
                     }
                     let _ = stream.set_nodelay(true);
-                    tasks.spawn(serve_connection(conns.admit(stream, peer), bank.clone()));
+                    // `None`: refused, every slot that could make room held by a priority connection.
+                    if let Some(guarded) = conns.admit(stream, peer) {
+                        tasks.spawn(serve_connection(guarded, bank.clone()));
+                    }
                 }
                 Err(e) => {
                     let pause = backoff.next_delay();

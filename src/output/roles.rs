@@ -68,6 +68,24 @@ pub async fn spawn(
                 },
             )));
             shared.log(Level::INFO, format!("modbus tcp server on {addr}"));
+            let open = crate::config::allow::open_to_all(&addr.to_string(), &m.allow);
+            let _ = shared.modbus.set(if open {
+                format!("tcp-server on {addr}, OPEN TO EVERY ADDRESS (output.modbus.allow is empty)")
+            } else if m.allow.is_empty() {
+                format!("tcp-server on {addr} (this box only)")
+            } else {
+                format!("tcp-server on {addr}, allow {}", m.allow.join(", "))
+            });
+            if open {
+                shared.log(
+                    Level::WARN,
+                    format!(
+                        "modbus tcp server on {addr} is open to every address: output.modbus.allow is empty, so any \
+                         host on the network may read the registers and write HR 100-103. List the PLC's address \
+                         (and any HMI/SCADA poller) in output.modbus.allow"
+                    ),
+                );
+            }
             // The built-in default serves this box only; a service needs the board config's address.
             if addr.ip().is_loopback() && std::env::var_os("INVOCATION_ID").is_some() {
                 shared.log(
@@ -83,6 +101,7 @@ pub async fn spawn(
             // A missing RS-485 adapter is retried with backoff, not fatal.
             roles.server_tasks.push(tokio::spawn(modbus::run_rtu_server(m.clone(), bank.clone(), stop.clone())));
             shared.log(Level::INFO, format!("modbus rtu server on {} unit {}", m.serial_device, m.unit_id));
+            let _ = shared.modbus.set(format!("rtu-server on {} unit {}", m.serial_device, m.unit_id));
         }
         ModbusMode::TcpClient | ModbusMode::RtuClient => {
             let target = if m.mode == ModbusMode::TcpClient {
@@ -109,6 +128,8 @@ pub async fn spawn(
                     if m.mode == ModbusMode::TcpClient { &m.peer } else { &m.serial_device }
                 ),
             );
+            let to = if m.mode == ModbusMode::TcpClient { &m.peer } else { &m.serial_device };
+            let _ = shared.modbus.set(format!("client to {to} (serves nobody)"));
         }
     }
     if cfg.output.serial.enabled {

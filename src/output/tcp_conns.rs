@@ -1,15 +1,20 @@
 //! Connection management of the Modbus TCP server: at most `max_connections` at once and
 //! `max_per_peer` from one address, each closed after `idle_timeout` without a complete request,
 //! and one closed to make room for a new one: first those that never had a request answered
-//! (a port scanner, an idle connection flood), then the least recently active. A PLC polling
-//! normally is therefore never closed for connections that only connect, and a flood from one
-//! address only ever evicts that address's own connections once it reaches its per-peer limit.
+//! (a port scanner, an idle connection flood), then the least recently active, but never a
+//! *priority* connection. A connection has priority once it has had requests answered for
+//! `priority_after` with no gap longer than `priority_after` between two of them: a PLC polling
+//! steadily. When every connection that could make room has priority, the newcomer is refused
+//! (closed at accept and counted), not the PLC: clients polling faster than the PLC from several
+//! addresses (an HMI, a SCADA poller, a misconfigured tool) no longer push it out.
 //!
 //! Modbus Messaging on TCP/IP Implementation Guide v1.0b, 4.2.1: a server limits its connections
 //! and, when the limit is reached, closes the oldest unused connection rather than refusing the new
-//! one. A PLC that reboots, or a switch that drops the link, leaves half-open connections the box
-//! never hears closing; without these rules they would pile up until the file-descriptor limit and
-//! the PLC's new connection could be refused.
+//! one; "priority" connections are kept. A PLC that reboots, or a switch that drops the link,
+//! leaves half-open connections the box never hears closing; without these rules they would pile
+//! up until the file-descriptor limit and the PLC's new connection could be refused. A half-open
+//! connection answers nothing, so it loses its priority `priority_after` after its last request and
+//! can then be closed for the PLC's new one.
 
 use super::bank::RegisterBank;
 use super::log_throttle::LogThrottle;
@@ -27,7 +32,7 @@ use tokio::sync::oneshot;
 use tokio::time::{Instant, Sleep};
 
 /// Limits of the Modbus TCP server (`[output.modbus] max_connections`, `max_connections_per_peer`,
-/// `idle_timeout_ms`, `allow`).
+/// `idle_timeout_ms`, `priority_after_ms`, `allow`).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct TcpLimits {
     /// Connections served at once; a new one beyond this closes another (see the module docs).
@@ -38,6 +43,9 @@ pub struct TcpLimits {
     /// A connection with no complete request for this long is closed; `None` keeps idle
     /// connections open. Bytes that do not complete a request do not count.
     pub idle_timeout: Option<Duration>,
+    /// A connection answered steadily (no gap longer than this) for this long has priority: it is
+    /// never closed for a newcomer. `None`: no connection has priority.
+    pub priority_after: Option<Duration>,
     /// Addresses allowed to connect (empty = all); others are closed at accept and counted.
     pub allow: AllowList,
 }
@@ -49,6 +57,7 @@ impl TcpLimits {
             max_connections: m.max_connections as usize,
             max_per_peer: m.max_connections_per_peer as usize,
             idle_timeout: (m.idle_timeout_ms > 0).then(|| Duration::from_millis(m.idle_timeout_ms)),
+            priority_after: (m.priority_after_ms > 0).then(|| Duration::from_millis(m.priority_after_ms)),
             // Checked by `Config::validate`; a bad entry here would allow nobody rather than everyone.
             allow: AllowList::parse(&m.allow).unwrap_or_else(|_| AllowList::nobody()),
         }
@@ -61,6 +70,7 @@ impl Default for TcpLimits {
             max_connections: 8,
             max_per_peer: 4,
             idle_timeout: Some(Duration::from_secs(60)),
+            priority_after: Some(Duration::from_secs(10)),
             allow: AllowList::default(),
         }
     }
@@ -73,6 +83,10 @@ struct Entry {
     last_activity: Instant,
     /// Whether a request on it has been answered without an exception.
     proven: bool,
+    /// Start of the current run of answered requests no more than `priority_after` apart.
+    steady_since: Option<Instant>,
+    /// The last answered request.
+    last_answer: Option<Instant>,
     close: oneshot::Sender<()>,
 }
 
@@ -80,6 +94,14 @@ impl Entry {
     /// Eviction order: never-answered connections first, then the least recently active.
     fn eviction_key(&self) -> (bool, Instant) {
         (self.proven, self.last_activity)
+    }
+
+    /// Whether it has been answered steadily for `after` (see the module docs).
+    fn priority(&self, after: Option<Duration>, now: Instant) -> bool {
+        let (Some(after), Some(since), Some(last)) = (after, self.steady_since, self.last_answer) else {
+            return false;
+        };
+        now.duration_since(since) >= after && now.duration_since(last) <= after
     }
 }
 
@@ -91,6 +113,7 @@ struct Table {
     next_id: u64,
     open: Vec<Entry>,
     eviction_log: LogThrottle,
+    refusal_log: LogThrottle,
 }
 
 /// The open connections of one server. Registering a connection beyond the limit signals the least
@@ -105,7 +128,12 @@ pub struct Connections {
 impl Connections {
     /// An empty table; the bank counts open, idle-closed and evicted connections.
     pub fn new(limits: TcpLimits, bank: Arc<RegisterBank>) -> Self {
-        let table = Table { next_id: 0, open: Vec::new(), eviction_log: LogThrottle::new(EVICTION_LOG_PERIOD) };
+        let table = Table {
+            next_id: 0,
+            open: Vec::new(),
+            eviction_log: LogThrottle::new(EVICTION_LOG_PERIOD),
+            refusal_log: LogThrottle::new(EVICTION_LOG_PERIOD),
+        };
         Self { table: Arc::new(Mutex::new(table)), limits, bank }
     }
 
@@ -125,40 +153,64 @@ impl Connections {
 
     /// Registers an accepted stream, first closing one connection of the same address when it is
     /// at `max_per_peer`, then one of any address while the table is full (never-answered
-    /// connections first, then the least recently active), and returns the stream wrapped so that
-    /// it obeys the idle timeout and eviction.
-    pub fn admit(&self, stream: TcpStream, peer: SocketAddr) -> GuardedStream {
+    /// connections first, then the least recently active; never one with priority), and returns
+    /// the stream wrapped so that it obeys the idle timeout and eviction. `None`: refused (closed,
+    /// counted) because every connection that could make room has priority.
+    pub fn admit(&self, stream: TcpStream, peer: SocketAddr) -> Option<GuardedStream> {
         let (tx, rx) = oneshot::channel();
         let now = Instant::now();
         let id = {
             let mut t = self.lock();
             let per_peer = self.limits.max_per_peer.clamp(1, self.limits.max_connections.max(1));
-            if t.open.iter().filter(|e| e.peer.ip() == peer.ip()).count() >= per_peer
-                && let Some(i) = (0..t.open.len())
-                    .filter(|&i| t.open[i].peer.ip() == peer.ip())
-                    .min_by_key(|&i| t.open[i].eviction_key())
-            {
+            if t.open.iter().filter(|e| e.peer.ip() == peer.ip()).count() >= per_peer {
+                let Some(i) = self.victim(&t, now, Some(peer)) else {
+                    return self.refuse(&mut t, peer, now, "per-address limit");
+                };
                 self.evict(&mut t, i, peer, now, "per-address limit");
             }
             while t.open.len() >= self.limits.max_connections.max(1) {
-                let Some(i) = (0..t.open.len()).min_by_key(|&i| t.open[i].eviction_key()) else { break };
+                let Some(i) = self.victim(&t, now, None) else {
+                    return self.refuse(&mut t, peer, now, "connection limit");
+                };
                 self.evict(&mut t, i, peer, now, "connection limit");
             }
             let id = t.next_id;
             t.next_id += 1;
-            t.open.push(Entry { id, peer, last_activity: now, proven: false, close: tx });
+            let entry =
+                Entry { id, peer, last_activity: now, proven: false, steady_since: None, last_answer: None, close: tx };
+            t.open.push(entry);
             self.bank.set_tcp_open(t.open.len());
             id
         };
         tracing::debug!("modbus tcp: connection from {peer}");
-        GuardedStream {
+        Some(GuardedStream {
             stream,
             peer,
             id,
             conns: self.clone(),
             eviction: Eviction::Watching(rx),
             idle: self.limits.idle_timeout.map(|d| (d, Box::pin(tokio::time::sleep(d)))),
+        })
+    }
+
+    /// The connection to close for a newcomer (of `same`'s address only, when given): the first in
+    /// eviction order without priority.
+    fn victim(&self, t: &Table, now: Instant, same: Option<SocketAddr>) -> Option<usize> {
+        (0..t.open.len())
+            .filter(|&i| same.is_none_or(|p| t.open[i].peer.ip() == p.ip()))
+            .filter(|&i| !t.open[i].priority(self.limits.priority_after, now))
+            .min_by_key(|&i| t.open[i].eviction_key())
+    }
+
+    fn refuse(&self, t: &mut Table, peer: SocketAddr, now: Instant, why: &str) -> Option<GuardedStream> {
+        if let Some(held_back) = t.refusal_log.allow(now) {
+            tracing::warn!(
+                "modbus tcp: {why} reached and every connection that could make room has priority \
+                 (answered steadily); refusing {peer} ({held_back} more refusals since the last message)"
+            );
         }
+        self.bank.note_tcp_refused();
+        None
     }
 
     fn evict(&self, t: &mut Table, i: usize, peer: SocketAddr, now: Instant, why: &str) {
@@ -177,9 +229,18 @@ impl Connections {
 
     fn touch(&self, id: u64, answered: bool) {
         let now = Instant::now();
+        let after = self.limits.priority_after;
         if let Some(e) = self.lock().open.iter_mut().find(|e| e.id == id) {
             e.last_activity = now;
             e.proven |= answered;
+            if answered {
+                // A gap longer than `priority_after` starts the steady run again.
+                let gap = e.last_answer.map(|l| now.duration_since(l));
+                if e.steady_since.is_none() || after.is_some_and(|a| gap.is_none_or(|g| g > a)) {
+                    e.steady_since = Some(now);
+                }
+                e.last_answer = Some(now);
+            }
         }
     }
 

@@ -142,7 +142,7 @@ pub struct Daemon {
     server_stops: Vec<tokio::sync::oneshot::Sender<()>>,
     server_tasks: Vec<tokio::task::JoinHandle<()>>,
     client_task: Option<tokio::task::JoinHandle<()>>,
-    metrics: Option<crate::output::metrics::MetricsServer>,
+    metrics: Option<crate::output::metrics_http::MetricsServer>,
     aux_tasks: Vec<tokio::task::JoinHandle<()>>,
     pipeline_thread: Option<std::thread::JoinHandle<()>>,
     other_threads: Vec<std::thread::JoinHandle<()>>,
@@ -502,7 +502,7 @@ impl Daemon {
         let serial_tx = roles.serial_tx;
         other_threads.extend(roles.serial_thread);
         // The Prometheus endpoint: a port it cannot bind is logged and shown, never fatal.
-        let metrics = crate::output::metrics::spawn(&cfg.output.metrics, timing.stale_after, &shared, &bank).await;
+        let metrics = crate::output::metrics_http::spawn(&cfg.output.metrics, timing.stale_after, &shared, &bank).await;
         if cfg.console.enabled {
             let (dev, baud, echo, sh, bk) =
                 (cfg.console.device.clone(), cfg.console.baud, cfg.console.echo, shared.clone(), bank.clone());

@@ -336,7 +336,8 @@ pub struct MetricsStatus {
     state: OnceLock<String>,
     /// Responses sent, by status code, in the order of [`MetricsStatus::CODES`].
     pub responses: [AtomicU64; 6],
-    /// Connections closed at accept: over the connection limit, or not in `output.metrics.allow`.
+    /// Connections closed at accept (over a connection limit, or not in `output.metrics.allow`),
+    /// or closed before their request head was complete to make room for a steady scraper.
     pub refused: AtomicU64,
     /// Connections that ended before a complete request arrived (closed or reset by the peer).
     pub aborted: AtomicU64,
@@ -381,6 +382,9 @@ pub struct Shared {
     /// Word order of the published register block (`output.modbus.word_order`), set once at start:
     /// the console decodes the block with it.
     word_order: OnceLock<crate::config::WordOrder>,
+    /// The Modbus role's state for the console's `status` (set once at start: the role, where it
+    /// serves, and whether it is open to every address); unset = off.
+    pub modbus: OnceLock<String>,
 }
 
 impl Shared {
@@ -396,6 +400,7 @@ impl Shared {
             history: HistoryStatus::default(),
             metrics: MetricsStatus::default(),
             word_order: OnceLock::new(),
+            modbus: OnceLock::new(),
         }
     }
 

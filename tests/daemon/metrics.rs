@@ -242,7 +242,7 @@ fn fme_run_serves_parseable_metrics_and_survives_hostile_requests() {
 
     // More connections from one address than the endpoint serves: the extra one is closed unanswered.
     std::thread::sleep(Duration::from_millis(300)); // the answered connections above finish
-    let idle: Vec<TcpStream> = (0..fme::output::metrics::MAX_PER_PEER)
+    let idle: Vec<TcpStream> = (0..fme::config::MetricsConfig::default().max_connections_per_peer)
         .map(|_| TcpStream::connect(("127.0.0.1", port)).expect("connect"))
         .collect();
     std::thread::sleep(Duration::from_millis(200));

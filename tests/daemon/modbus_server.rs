@@ -158,10 +158,10 @@ async fn an_evicted_stream_keeps_failing_when_polled_again() {
         Connections::new(TcpLimits { max_connections: 1, idle_timeout: None, ..TcpLimits::default() }, sample_bank());
     let _ca = tokio::net::TcpStream::connect(addr).await.expect("connect a");
     let (sa, peer_a) = listener.accept().await.expect("accept a");
-    let mut a = conns.admit(sa, peer_a);
+    let mut a = conns.admit(sa, peer_a).expect("a admitted");
     let _cb = tokio::net::TcpStream::connect(addr).await.expect("connect b");
     let (sb, peer_b) = listener.accept().await.expect("accept b");
-    let _b = conns.admit(sb, peer_b);
+    let _b = conns.admit(sb, peer_b).expect("b admitted");
     let mut buf = [0u8; 8];
     for attempt in 0..3 {
         let e = a.read(&mut buf).await.expect_err("evicted stream must fail");
