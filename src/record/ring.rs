@@ -245,12 +245,13 @@ mod tests {
     #[test]
     fn bounded_by_size() {
         let dir = tempfile::tempdir().expect("tempdir");
-        let mut r = Ring::open(dir.path(), 1e9, 10_000).expect("open");
+        // The budget counts whole file-system blocks: frames of one 4 KiB block each.
+        let mut r = Ring::open(dir.path(), 1e9, 40_960).expect("open");
         for i in 0..100u64 {
-            r.push(entry(i, i as f64), &vec![7u8; 1000]).expect("push");
+            r.push(entry(i, i as f64), &vec![7u8; 4096]).expect("push");
         }
         assert_eq!(r.entries().len(), 10);
-        assert!(r.bytes() <= 10_000);
+        assert!(r.bytes() <= 40_960);
         let on_disk: u64 = std::fs::read_dir(dir.path())
             .expect("dir")
             .flatten()
