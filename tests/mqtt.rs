@@ -7,7 +7,8 @@
 //! the password file is fixed); TLS with a CA made at test time, a broker that requires a client
 //! certificate, and a broker certificate from another CA (status bit 9); a slow link (a delaying
 //! proxy, 700 ms round trip) that must connect, deliver and open one TCP connection per attempt,
-//! also while the broker behind it is down and then up.
+//! also while the broker behind it is down and then up, and ending each attempt after
+//! `connect_timeout_s` on a link slower than that.
 //!
 //! Mosquitto comes from Debian's package (`make setup`); without it these tests fail, naming it.
 
@@ -876,4 +877,29 @@ async fn slow_link_figures_30s() {
         drop(tx);
         shared.request_stop();
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_link_slower_than_connect_timeout_s_ends_each_attempt_then_backs_off() {
+    let (min_ms, max_ms) = (300, 600);
+    let broker = Broker::start("");
+    // 3 s round trip: no CONNACK within the 1 s allowed.
+    let proxy = DelayProxy::start(broker.port, Duration::from_millis(1500)).await;
+    let mut cfg = slow_link_config(proxy.port, "t8", "box8", min_ms, max_ms);
+    cfg.output.mqtt.connect_timeout_s = 1;
+    let shared = Arc::new(Shared::new(String::new(), 50));
+    let start = Instant::now();
+    let (mut tx, _thread) = fme::output::mqtt::spawn(&cfg, shared.clone()).expect("spawn");
+    let timed_out = feed_until(&mut tx, Duration::from_secs(15), || {
+        let m = shared.health().mqtt;
+        m.connect_attempts >= 3 && m.last_error.contains("no CONNACK within 1 s (output.mqtt.connect_timeout_s)")
+    })
+    .await;
+    let (accepts, elapsed) = (proxy.accepts(), start.elapsed());
+    let m = shared.health().mqtt;
+    assert!(timed_out, "each attempt ends after connect_timeout_s and says so: {m:?}");
+    assert_ne!(m.link, MqttLink::Connected);
+    let bound = most_attempts(elapsed, min_ms, max_ms);
+    assert!(accepts <= bound, "{accepts} TCP connections in {elapsed:?}; the backoff allows {bound}: {m:?}");
+    assert!(accepts as u64 <= m.connect_attempts, "one TCP connection per attempt: {accepts}, {m:?}");
 }
