@@ -394,6 +394,7 @@ mod tests {
             ("box_id = \"cage#1\"", "output.mqtt.box_id"),
             ("qos = 2", "output.mqtt.qos"),
             ("keepalive_s = 1", "output.mqtt.keepalive_s"),
+            ("connect_timeout_s = 0", "output.mqtt.connect_timeout_s"),
             ("queue_messages = 0", "output.mqtt.queue_messages"),
             ("reconnect_min_ms = 90000", "output.mqtt.reconnect_min_ms"),
             ("tls = true\ncert_file = \"c.pem\"", "output.mqtt.key_file"),

@@ -99,6 +99,7 @@ pub const RANGES: &[Range] = &[
     r("output.serial.baud", 50.0, 4_000_000.0, "bit/s"),
     r("output.mqtt.qos", 0.0, 1.0, ""),
     r("output.mqtt.keepalive_s", 5.0, HOUR_S, "s"),
+    r("output.mqtt.connect_timeout_s", 1.0, 600.0, "s"),
     r("output.mqtt.queue_messages", 1.0, 100_000.0, "messages"),
     r("output.mqtt.reconnect_min_ms", 1.0, HOUR_MS, "ms"),
     r("output.mqtt.reconnect_max_ms", 1.0, HOUR_MS, "ms"),

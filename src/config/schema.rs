@@ -162,6 +162,10 @@ pub struct MqttConfig {
     /// MQTT keep-alive, s: the broker publishes the Last Will ("offline") after 1.5 x this without
     /// a packet from a box that vanished without closing its connection.
     pub keepalive_s: u64,
+    /// Longest wait for the broker's CONNACK after starting a connection (TCP, TLS and CONNECT
+    /// together), s. Generous, for slow links (4G, satellite: 300-700 ms round trip); a connection
+    /// that takes longer is closed and retried after the backoff.
+    pub connect_timeout_s: u64,
     /// Messages held while the broker is away; when full, the oldest is dropped and counted.
     pub queue_messages: usize,
     /// First reconnect delay, ms (doubles up to `reconnect_max_ms`).
@@ -191,6 +195,7 @@ impl Default for MqttConfig {
             prefix: "fme".into(),
             qos: 1,
             keepalive_s: 30,
+            connect_timeout_s: 20,
             queue_messages: 1000,
             reconnect_min_ms: 1000,
             reconnect_max_ms: 60_000,

@@ -8,6 +8,11 @@
 //!     -> Queue (bounded: full = oldest dropped and counted) -> fme-mqtt thread (own tokio runtime)
 //!         -> rumqttc (QoS 1: a message leaves the books only on the broker's PUBACK)
 //! ```
+//! Each connection attempt gets a fresh client whose event loop is polled without pause by a task
+//! of its own ([`Driver`]); the connection state, the connect timeout and the backoff live outside
+//! it. rumqttc's `poll` is not cancel-safe while connecting: a poll dropped before the CONNACK (a
+//! `select!` against a timer) starts the TCP connection over, so over a slow link (CONNACK later
+//! than the timer) the box would never connect and would open a connection per tick.
 //! The pipeline and Modbus never wait on the broker: the sender only pushes into the bounded queue.
 //! While the broker is away the queue holds the newest `queue_messages` messages; after a reconnect
 //! they are delivered (counted as delivered-after-reconnect) and messages sent but not acknowledged
@@ -446,6 +451,7 @@ struct Settings {
     topics: Topics,
     qos: QoS,
     keepalive: Duration,
+    connect_timeout_s: u64,
     min_backoff: Duration,
     max_backoff: Duration,
     username: String,
@@ -473,6 +479,7 @@ pub fn spawn(cfg: &Config, shared: Arc<Shared>) -> std::io::Result<(MqttSender, 
         topics: Topics::new(&m.prefix, &id),
         qos: if m.qos == 0 { QoS::AtMostOnce } else { QoS::AtLeastOnce },
         keepalive: Duration::from_secs(m.keepalive_s),
+        connect_timeout_s: m.connect_timeout_s.max(1),
         min_backoff: Duration::from_millis(m.reconnect_min_ms),
         max_backoff: Duration::from_millis(m.reconnect_max_ms),
         username: m.username.clone(),
@@ -690,7 +697,7 @@ async fn run(s: Settings, inner: Arc<Inner>, shared: Arc<Shared>) {
         shared.with_health(|h| h.mqtt.connect_attempts += 1);
         let failure = match connect(&s, &inner, &shared, &mut stop_seen).await {
             Ok(None) => return,
-            Ok(Some((client, eventloop))) => {
+            Ok(Some((client, driver))) => {
                 backoff.reset();
                 inner.link_up.store(true, Ordering::SeqCst);
                 shared.with_health(|h| {
@@ -712,7 +719,7 @@ async fn run(s: Settings, inner: Arc<Inner>, shared: Arc<Shared>) {
                 );
                 books.last_logged = None;
                 connected_before = true;
-                let end = session(&s, &inner, &shared, &books, client, eventloop, &mut stop_seen).await;
+                let end = session(&s, &inner, &shared, &books, client, driver, &mut stop_seen).await;
                 inner.link_up.store(false, Ordering::SeqCst);
                 match end {
                     None => {
@@ -750,30 +757,75 @@ async fn run(s: Settings, inner: Arc<Inner>, shared: Arc<Shared>) {
     }
 }
 
-/// One connection attempt: `Ok(None)` when asked to stop meanwhile.
+/// What the event loop of a client said: an event, or the error that ended it.
+type Polled = Result<Event, ConnectionError>;
+
+/// The event loop of one client, polled without pause by a task of its own until its first error;
+/// its events come through a channel (whose `recv` is cancel-safe, so the MQTT thread may race it
+/// against timers). Never polled again after an error: the next attempt is a fresh client, after
+/// the backoff. Dropping the driver ends the task and closes the connection.
+struct Driver {
+    events: tokio::sync::mpsc::Receiver<Polled>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl Driver {
+    fn start(mut eventloop: EventLoop) -> Self {
+        let (tx, events) = tokio::sync::mpsc::channel(64);
+        let task = tokio::spawn(async move {
+            loop {
+                let polled = eventloop.poll().await;
+                let failed = polled.is_err();
+                if tx.send(polled).await.is_err() || failed {
+                    return;
+                }
+            }
+        });
+        Self { events, task }
+    }
+
+    /// The next event; an error when the task ended without one.
+    async fn next(&mut self) -> Polled {
+        self.events.recv().await.unwrap_or(Err(ConnectionError::RequestsDone))
+    }
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        self.task.abort();
+    }
+}
+
+/// One connection attempt (one TCP connection): `Ok(None)` when asked to stop meanwhile.
 async fn connect(
     s: &Settings,
     inner: &Inner,
     shared: &Shared,
     stop_seen: &mut Option<Instant>,
-) -> Result<Option<(AsyncClient, EventLoop)>, Failure> {
+) -> Result<Option<(AsyncClient, Driver)>, Failure> {
     let opts = options(s).map_err(Failure::Refused)?;
     let (client, mut eventloop) = AsyncClient::new(opts, 64);
-    eventloop.network_options.set_connection_timeout(5);
-    let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
+    // rumqttc's timeout covers the TCP connect, the TLS handshake and the CONNACK.
+    eventloop.network_options.set_connection_timeout(s.connect_timeout_s);
+    let mut driver = Driver::start(eventloop);
+    let too_slow =
+        || Failure::Network(format!("no CONNACK within {} s (output.mqtt.connect_timeout_s)", s.connect_timeout_s));
+    // A backstop only: rumqttc's own timeout ends the attempt first.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(s.connect_timeout_s + 2);
     loop {
         if closing(inner, shared, stop_seen) || shared.stopping() {
             return Ok(None);
         }
         tokio::select! {
-            ev = eventloop.poll() => match ev {
-                Ok(Event::Incoming(Packet::ConnAck(_))) => return Ok(Some((client, eventloop))),
+            ev = driver.next() => match ev {
+                Ok(Event::Incoming(Packet::ConnAck(_))) => return Ok(Some((client, driver))),
                 Ok(_) => {}
+                Err(ConnectionError::NetworkTimeout) => return Err(too_slow()),
                 Err(e) => return Err(classify(&e)),
             },
             () = tokio::time::sleep(Duration::from_millis(100)) => {
                 if tokio::time::Instant::now() > deadline {
-                    return Err(Failure::Network("no CONNACK within 10 s".into()));
+                    return Err(too_slow());
                 }
             }
         }
@@ -795,7 +847,7 @@ async fn session(
     shared: &Shared,
     books: &Books,
     client: AsyncClient,
-    mut eventloop: EventLoop,
+    mut driver: Driver,
     stop_seen: &mut Option<Instant>,
 ) -> Option<Failure> {
     let mut in_flight: VecDeque<InFlight> = VecDeque::with_capacity(MAX_IN_FLIGHT + 4);
@@ -852,7 +904,7 @@ async fn session(
             if acked || flush_deadline.is_some_and(|d| tokio::time::Instant::now() > d) {
                 let _ = client.try_disconnect();
                 let end = tokio::time::Instant::now() + Duration::from_millis(200);
-                while let Ok(Ok(ev)) = tokio::time::timeout_at(end, eventloop.poll()).await {
+                while let Ok(Ok(ev)) = tokio::time::timeout_at(end, driver.next()).await {
                     if matches!(ev, Event::Outgoing(Outgoing::Disconnect)) {
                         break;
                     }
@@ -862,7 +914,7 @@ async fn session(
             }
         }
         tokio::select! {
-            ev = eventloop.poll() => match ev {
+            ev = driver.next() => match ev {
                 Ok(Event::Outgoing(Outgoing::Publish(pkid))) => {
                     if let Some(f) = in_flight.iter_mut().find(|f| f.pkid.is_none()) {
                         f.pkid = Some(pkid);
