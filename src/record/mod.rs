@@ -74,6 +74,8 @@ struct Writer {
     paused_until: Option<Instant>,
     last_error_log: Option<Instant>,
     jpeg: Vec<u8>,
+    /// The camera's source (named in the snapshots' top bar).
+    source: PathBuf,
 }
 
 impl Writer {
@@ -156,7 +158,8 @@ impl Writer {
             let name = format!("{}-{:08}", freeze::utc_stamp(std::time::SystemTime::now()), frame.seq);
             let depth = (!r.depth.is_empty()).then_some(r.depth.as_slice());
             let dir = self.dir.join("snapshots");
-            match snapshot::write(&dir, &name, frame, &r.view, r.sample.as_ref(), depth, self.keep_snapshots) {
+            let caption = snapshot::Caption::now(&self.source, r.sample.as_ref());
+            match snapshot::write(&dir, &name, frame, &r.view, &caption, depth, self.keep_snapshots) {
                 Ok(p) => {
                     self.recovered();
                     self.shared.with_health(|h| {
@@ -235,6 +238,7 @@ impl Recorder {
             paused_until: None,
             last_error_log: None,
             jpeg: Vec::new(),
+            source: cfg.source.path.clone(),
         };
         let sh = shared.clone();
         let thread = std::thread::Builder::new().name("fme-recorder".into()).spawn(move || {
@@ -400,9 +404,11 @@ impl Recorder {
 }
 
 /// Writes one snapshot now (`fme snapshot`): the frame with `pipeline`'s results on it and its
-/// metric depth map into `dir`, keeping `keep`. Returns the JPEG's path.
+/// metric depth map into `dir`, keeping `keep`; the top bar names the camera of `source`. Returns
+/// the JPEG's path.
 pub fn snapshot_now(
     dir: &Path,
+    source: &Path,
     frame: &Frame,
     pipeline: &dyn Pipeline,
     sample: Option<&ActivitySample>,
@@ -413,5 +419,6 @@ pub fn snapshot_now(
     let mut depth = Vec::new();
     let has_depth = pipeline.depth_grid((frame.width, frame.height), snapshot::DEPTH_GRID, &mut depth);
     let name = format!("{}-{:08}", freeze::utc_stamp(std::time::SystemTime::now()), frame.seq);
-    snapshot::write(dir, &name, frame, &view, sample, has_depth.then_some(depth.as_slice()), keep)
+    let caption = snapshot::Caption::now(source, sample);
+    snapshot::write(dir, &name, frame, &view, &caption, has_depth.then_some(depth.as_slice()), keep)
 }
