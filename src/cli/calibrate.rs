@@ -546,3 +546,41 @@ fn overlay(
     }
     img.save_with_format(path, image::ImageFormat::Png).map_err(|e| usage(format!("--overlay {}: {e}", path.display())))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pose;
+
+    fn cam(eye: (f64, f64, f64), target: (f64, f64, f64)) -> Camera {
+        let pose = Pose::look_at(
+            WorldPoint::new(eye.0, eye.1, eye.2),
+            WorldPoint::new(target.0, target.1, target.2),
+            nalgebra::Vector3::z(),
+        )
+        .expect("pose");
+        Camera { intrinsics: Intrinsics::from_hfov(640, 480, 90.0).expect("intrinsics"), pose }
+    }
+
+    #[test]
+    fn origin_marked_in_view_or_by_an_arrow_at_the_edge() {
+        // Looking at the origin from 5 m: in view, at the centre.
+        match origin_mark(&cam((0.0, -5.0, 0.0), (0.0, 0.0, 0.0)), 640, 480) {
+            Some(OriginMark::InView(p)) => assert!((p.u - 320.0).abs() < 1e-6 && (p.v - 240.0).abs() < 1e-6),
+            other => panic!("{other:?}"),
+        }
+        // The origin 10 m to the left at 5 m: an arrow on the left edge pointing left.
+        match origin_mark(&cam((10.0, -5.0, 0.0), (10.0, 0.0, 0.0)), 640, 480) {
+            Some(OriginMark::Edge { tip, dir, behind: false }) => {
+                assert!((tip.u - EDGE_INSET).abs() < 1e-6 && (tip.v - 240.0).abs() < 1e-6, "{tip:?}");
+                assert!(dir.0 < -0.99, "{dir:?}");
+            }
+            other => panic!("{other:?}"),
+        }
+        // Behind the camera and below: an arrow on the bottom edge, said to be behind.
+        match origin_mark(&cam((0.0, 5.0, 3.0), (0.0, 10.0, 3.0)), 640, 480) {
+            Some(OriginMark::Edge { tip, behind: true, .. }) => assert!((tip.v - (480.0 - EDGE_INSET)).abs() < 1e-6),
+            other => panic!("{other:?}"),
+        }
+    }
+}

@@ -67,26 +67,27 @@ pub fn parse_when(flag: &str, s: &str, tz: &TimeZone) -> Result<i64, String> {
     ts.map(|t| t.as_millisecond()).map_err(|e| format!("{flag} {s:?}: {e}"))
 }
 
-/// Local `YYYY-MM-DD HH:MM` of an instant.
-fn stamp(ms: i64, tz: &TimeZone) -> String {
-    jiff::Timestamp::from_millisecond(ms)
-        .map(|t| t.to_zoned(tz.clone()).strftime("%Y-%m-%d %H:%M").to_string())
-        .unwrap_or_default()
+/// The rows a report covers, the summary's hours and the plot's time range.
+#[derive(Debug)]
+struct Selection {
+    /// The first line of the text (what was read).
+    text: String,
+    rows: Vec<history::Row>,
+    torn: usize,
+    hours_from: i64,
+    hours: usize,
+    /// The plot's time axis, ms since 1970 UTC.
+    range: (i64, i64),
 }
 
-/// Runs `fme report`. A missing or malformed day file, a stretch with no rows, or a bad `--day`,
-/// `--from`, `--to` or `--tz` exits 2 naming the file and line or the flag (a torn last line is
-/// skipped, as after a power cut).
-pub fn run(a: ReportArgs) -> anyhow::Result<()> {
+/// `--day` (the rows of one UTC day file; the plot spans them) or `--from`/`--to` (the rows in that
+/// stretch, from every day file it touches; the plot spans the stretch).
+fn select(a: &ReportArgs, tz: &TimeZone) -> anyhow::Result<Selection> {
     let usage = |m: String| anyhow::Error::new(UsageError(m));
-    let tz = match &a.tz {
-        Some(z) => parse_tz(z).map_err(usage)?,
-        None => TimeZone::system(),
-    };
     const DAY: i64 = 86_400_000;
-    let (mut text, rows, torn, hours_from, hours, range) = if a.from.is_some() || a.to.is_some() {
-        let from = a.from.as_deref().map(|s| parse_when("--from", s, &tz)).transpose().map_err(usage)?;
-        let to = a.to.as_deref().map(|s| parse_when("--to", s, &tz)).transpose().map_err(usage)?;
+    Ok(if a.from.is_some() || a.to.is_some() {
+        let from = a.from.as_deref().map(|s| parse_when("--from", s, tz)).transpose().map_err(usage)?;
+        let to = a.to.as_deref().map(|s| parse_when("--to", s, tz)).transpose().map_err(usage)?;
         let (from, to) = match (from, to) {
             (Some(f), Some(t)) => (f, t),
             (Some(f), None) => (f, f + DAY),
@@ -101,13 +102,20 @@ pub fn run(a: ReportArgs) -> anyhow::Result<()> {
             return Err(usage(format!(
                 "{}: no history rows from {} to {}",
                 a.history.display(),
-                stamp(from, &tz),
-                stamp(to, &tz)
+                stamp(from, tz),
+                stamp(to, tz)
             )));
         }
         let first = from.div_euclid(3_600_000) * 3_600_000;
         let hours = ((to - first + 3_599_999) / 3_600_000).clamp(1, 24 * 62) as usize;
-        (format!("{}: {} rows\n", a.history.display(), rows.len()), rows, torn, first, hours, (from, to))
+        Selection {
+            text: format!("{}: {} rows\n", a.history.display(), rows.len()),
+            rows,
+            torn,
+            hours_from: first,
+            hours,
+            range: (from, to),
+        }
     } else {
         let day = match &a.day {
             Some(d) => history::parse_day(d).ok_or_else(|| usage(format!("--day {d:?}: must be a date YYYY-MM-DD")))?,
@@ -131,8 +139,27 @@ pub fn run(a: ReportArgs) -> anyhow::Result<()> {
             _ => (day * DAY, (day + 1) * DAY),
         };
         let text = format!("{}: {} rows\n", path.display(), rows.len());
-        (text, rows, usize::from(file.torn_last_line), day * DAY, 24, range)
+        Selection { text, rows, torn: usize::from(file.torn_last_line), hours_from: day * DAY, hours: 24, range }
+    })
+}
+
+/// Local `YYYY-MM-DD HH:MM` of an instant.
+fn stamp(ms: i64, tz: &TimeZone) -> String {
+    jiff::Timestamp::from_millisecond(ms)
+        .map(|t| t.to_zoned(tz.clone()).strftime("%Y-%m-%d %H:%M").to_string())
+        .unwrap_or_default()
+}
+
+/// Runs `fme report`. A missing or malformed day file, a stretch with no rows, or a bad `--day`,
+/// `--from`, `--to` or `--tz` exits 2 naming the file and line or the flag (a torn last line is
+/// skipped, as after a power cut).
+pub fn run(a: ReportArgs) -> anyhow::Result<()> {
+    let usage = |m: String| anyhow::Error::new(UsageError(m));
+    let tz = match &a.tz {
+        Some(z) => parse_tz(z).map_err(usage)?,
+        None => TimeZone::system(),
     };
+    let Selection { mut text, rows, torn, hours_from, hours, range } = select(&a, &tz)?;
     let summary = history::summarize_hours(&rows, hours_from, hours);
     text.push_str(&history::format_summary(&summary, torn));
     if let Some(png) = &a.plot {
@@ -153,4 +180,97 @@ pub fn run(a: ReportArgs) -> anyhow::Result<()> {
         text.push_str(&format!("plot: {}\n", png.display()));
     }
     super::write_stdout(&text)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::history::Row;
+
+    const H: i64 = 3_600_000;
+
+    fn day_ms(d: &str) -> i64 {
+        history::parse_day(d).expect("day") * 86_400_000
+    }
+
+    /// Day files with a row every 10 minutes over each of `spans` (from, to), ms.
+    fn write(dir: &std::path::Path, spans: &[(i64, i64)]) {
+        let mut files: std::collections::BTreeMap<i64, String> = std::collections::BTreeMap::new();
+        for &(a, b) in spans {
+            for t in (a..b).step_by(600_000) {
+                let text = files.entry(history::day_of(t)).or_insert_with(|| format!("{}\n", history::HEADER));
+                let r = Row {
+                    unix_ms: t,
+                    activity_mps: 0.2,
+                    smoothed_mps: 0.2,
+                    ci95_mps: 0.01,
+                    n_fish: 5,
+                    bls: 0.5,
+                    status: 15,
+                    fault: 0,
+                    feeding: false,
+                    scale: crate::pipeline::ScaleSource::Fish,
+                    unlike_fish: false,
+                };
+                history::format_row(&r, text);
+            }
+        }
+        for (day, text) in files {
+            std::fs::write(history::day_path(dir, day), text).expect("write");
+        }
+    }
+
+    fn args(dir: &std::path::Path, day: Option<&str>, from: Option<&str>, to: Option<&str>) -> ReportArgs {
+        ReportArgs {
+            history: dir.to_path_buf(),
+            day: day.map(str::to_string),
+            from: from.map(str::to_string),
+            to: to.map(str::to_string),
+            tz: None,
+            plot: None,
+            config: super::super::ConfigArgs::default(),
+        }
+    }
+
+    #[test]
+    fn time_range_follows_the_data_or_from_to_in_the_zone() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let (d4, d5) = (day_ms("2026-12-04"), day_ms("2026-12-05"));
+        write(dir.path(), &[(d4 + 6 * H, d4 + 8 * H), (d5, d5 + 2 * H)]);
+        let utc = TimeZone::UTC;
+        // --day: the plot spans the day's rows.
+        let s = select(&args(dir.path(), Some("2026-12-04"), None, None), &utc).expect("day");
+        assert_eq!(s.range, (d4 + 6 * H, d4 + 8 * H - 600_000));
+        assert_eq!(s.rows.len(), 12);
+        // --from/--to in UTC: across the day files, `to` exclusive.
+        let a = args(dir.path(), None, Some("2026-12-04 07:00"), Some("2026-12-05T01:00"));
+        let s = select(&a, &utc).expect("range");
+        assert_eq!(s.range, (d4 + 7 * H, d5 + H));
+        assert_eq!(s.rows.len(), 6 + 6, "07:00-08:00 on the 4th, 00:00-01:00 on the 5th");
+        // The same wall times in +05:30 are 5.5 h earlier: only the 4th's rows.
+        let s = select(&a, &parse_tz("+05:30").expect("tz")).expect("range");
+        assert_eq!(s.range, (d4 + 7 * H - 11 * H / 2, d5 + H - 11 * H / 2));
+        assert_eq!(s.rows.len(), 12, "{:?}", s.range);
+        // --from alone: one day; an instant with an offset ignores --tz.
+        let s = select(&args(dir.path(), None, Some("2026-12-04T23:00Z"), None), &utc).expect("from");
+        assert_eq!(s.range, (d4 + 23 * H, d5 + 23 * H));
+        // Empty or reversed stretches are errors naming the flags.
+        let e = select(&args(dir.path(), None, Some("2026-12-06"), None), &utc).expect_err("no rows");
+        assert!(e.to_string().contains("no history rows"), "{e}");
+        let e = select(&args(dir.path(), None, Some("2026-12-05"), Some("2026-12-04")), &utc).expect_err("reversed");
+        assert!(e.to_string().contains("not before --to"), "{e}");
+        assert!(parse_when("--from", "04.12.2026", &utc).is_err());
+    }
+
+    #[test]
+    fn zones_by_name_or_offset() {
+        let t = jiff::Timestamp::from_second(0).expect("epoch");
+        assert_eq!(parse_tz("+05:30").expect("offset").to_offset(t).seconds(), 19_800);
+        assert_eq!(parse_tz("-03:00").expect("offset").to_offset(t).seconds(), -10_800);
+        assert_eq!(parse_tz("UTC").expect("utc").to_offset(t).seconds(), 0);
+        assert_eq!(parse_tz("Asia/Kolkata").expect("iana").to_offset(t).seconds(), 19_800);
+        for bad in ["Mars/Base", "+5:30", "+25:00"] {
+            assert!(parse_tz(bad).is_err(), "{bad}");
+        }
+    }
 }

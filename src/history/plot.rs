@@ -351,4 +351,49 @@ mod tests {
         assert_eq!((s[0].0, s[0].1), (1000, 61_000));
         assert_eq!(s[1].0, 100_000, "{s:?}");
     }
+
+    #[test]
+    fn ticks_at_whole_local_hours_labelled_in_the_zone() {
+        let from = 1_796_342_400_000; // 2026-12-04T00:00Z
+        let utc = TimeZone::UTC;
+        let kolkata = TimeZone::fixed(jiff::tz::Offset::from_seconds(19_800).expect("offset"));
+        let (t_utc, date) = time_ticks(from, from + 12 * 3_600_000, &utc);
+        assert!(!date);
+        assert_eq!(t_utc[0], from);
+        assert_eq!(t_utc[1] - t_utc[0], 3_600_000, "hourly over 12 h");
+        assert_eq!(tick_label(t_utc[0], &utc, false), "00:00");
+        // +05:30: the first whole local hour is 06:00 local, 00:30 UTC; --tz changes the labels.
+        let (t_k, _) = time_ticks(from, from + 12 * 3_600_000, &kolkata);
+        assert_eq!(t_k[0], from + 1_800_000);
+        assert_eq!(tick_label(t_k[0], &kolkata, false), "06:00");
+        assert_ne!(tick_label(from, &utc, false), tick_label(from, &kolkata, false));
+        // Longer spans: fewer ticks, with the date.
+        let (t, date) = time_ticks(from, from + 48 * 3_600_000, &utc);
+        assert!(date && t.len() <= 16, "{}", t.len());
+        assert_eq!(tick_label(t[1], &utc, true), "12-04 06:00");
+        assert_eq!(zone_name(&kolkata, from), "UTC+05:30");
+    }
+
+    #[test]
+    fn fish_axis_has_whole_numbers() {
+        assert_eq!(count_ticks(3), [0.0, 1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(count_ticks(22), [0.0, 5.0, 10.0, 15.0, 20.0, 25.0]);
+        assert!(count_ticks(137).iter().all(|v| v.fract() == 0.0));
+    }
+
+    #[test]
+    fn feeding_thresholds_drawn_where_configured() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let rows: Vec<Row> = (0..600).map(|i| r(i * 10, 0, i > 300)).collect();
+        let count = |feeding: Option<(f64, f64)>, name: &str| {
+            let path = dir.path().join(name);
+            let o = PlotOptions { from_ms: 0, to_ms: 6_000_000, tz: TimeZone::UTC, feeding };
+            plot_day(&path, "test", &rows, &o).expect("plot");
+            let img = image::open(&path).expect("png").to_rgb8();
+            THRESHOLD_COLOURS.map(|c| img.pixels().filter(|p| p.0 == [c.0, c.1, c.2]).count())
+        };
+        let [on, off] = count(Some((0.25, 0.15)), "with.png");
+        assert!(on > 500 && off > 500, "dashed lines across the plot: {on} {off}");
+        assert_eq!(count(None, "without.png"), [0, 0]);
+    }
 }

@@ -180,6 +180,10 @@ pub fn overlay(frame: &Frame, view: &FrameView, caption: &Caption) -> Result<Rgb
         .collect();
     // Labels are drawn after every mark, so no mark covers one.
     let mut labels: Vec<(Rect, String, Rgb<u8>)> = Vec::new();
+    // A label never covers a reference's cross (it may cover a fish: the box stays visible).
+    for r in &marks[view.tracks.len()..] {
+        placer.block(*r);
+    }
     for t in &view.tracks {
         let label = format!("{} {}m/s {}m", t.id, num(t.speed_mps, 2), num(t.depth_m, 1));
         let (tw, th) = draw::text_size(&label, small);
@@ -331,7 +335,15 @@ mod tests {
         assert_eq!(img.get_pixel(220, 116).0, [255, 64, 64], "a reference 30 cm off is red");
         // The legend (bottom left) explains the marks: text pixels in the reference colour there.
         let legend = (0..160).flat_map(|x| (200..240).map(move |y| (x, y)));
-        assert!(legend.filter(|&(x, y)| img.get_pixel(x, y).0[0] > 200 && img.get_pixel(x, y).0[1] > 180).count() > 30);
+        assert!(
+            legend
+                .filter(|&(x, y)| {
+                    let p = img.get_pixel(x, y).0;
+                    p[0] > 120 && p[1] > 100 && p[2] < 60
+                })
+                .count()
+                > 30
+        );
     }
 
     #[test]
