@@ -37,6 +37,7 @@ pub mod cli;
 pub mod config;
 pub mod console;
 pub mod detection;
+pub mod draw;
 pub mod eval;
 pub mod familiarity;
 pub mod geometry;

@@ -70,7 +70,14 @@ pub fn run(args: SnapshotArgs) -> anyhow::Result<()> {
     let Some((frame, sample)) = last else {
         return Err(UsageError(format!("source {}: no frame", cfg.source.path.display())).into());
     };
-    let path = crate::record::snapshot_now(&dir, &frame, &*pipeline, sample.as_ref(), cfg.record.keep_snapshots)
-        .map_err(|e| anyhow::anyhow!("snapshot: {e}"))?;
+    let path = crate::record::snapshot_now(
+        &dir,
+        &cfg.source.path,
+        &frame,
+        &*pipeline,
+        sample.as_ref(),
+        cfg.record.keep_snapshots,
+    )
+    .map_err(|e| anyhow::anyhow!("snapshot: {e}"))?;
     crate::cli::write_stdout(&format!("{}\n", path.display()))
 }

@@ -5,16 +5,14 @@ use plotters::prelude::*;
 use std::path::Path;
 use std::sync::Once;
 
-/// DejaVu Sans Mono (Bitstream Vera licence, `assets/fonts/DejaVuSansMono-LICENSE.txt`).
-static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSansMono.ttf");
 static REGISTER: Once = Once::new();
 
-/// Registers the bundled font as plotters' `sans-serif` (once per process; every PNG fme draws
+/// Registers the bundled font ([`crate::draw::FONT`]) as plotters' `sans-serif` (once per process; every PNG fme draws
 /// uses it).
 pub fn register_font() {
     REGISTER.call_once(|| {
         // A bundled valid TTF; if it were rejected, text would be missing but the plot still drawn.
-        let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
+        let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, crate::draw::FONT);
     });
 }
 

@@ -82,6 +82,8 @@ struct Writer {
     retry: crate::backoff::Backoff,
     last_error_log: Option<Instant>,
     jpeg: Vec<u8>,
+    /// The camera's source (named in the snapshots' top bar).
+    source: PathBuf,
 }
 
 /// Marks a write to the state directory in flight (health `disk.record_since`) while it lives.
@@ -223,7 +225,8 @@ impl Writer {
             let depth = (!r.depth.is_empty()).then_some(r.depth.as_slice());
             let dir = self.dir.join("snapshots");
             let _busy = InFlight::new(&self.shared);
-            match snapshot::write(&dir, &name, frame, &r.view, r.sample.as_ref(), depth, self.keep_snapshots) {
+            let caption = snapshot::Caption::now(&self.source, r.sample.as_ref());
+            match snapshot::write(&dir, &name, frame, &r.view, &caption, depth, self.keep_snapshots) {
                 Ok(p) => {
                     self.recovered();
                     self.shared.with_health(|h| {
@@ -292,6 +295,7 @@ impl Recorder {
             retry: crate::backoff::Backoff::new(RETRY_MIN, RETRY_MAX),
             last_error_log: None,
             jpeg: Vec::new(),
+            source: cfg.source.path.clone(),
         };
         let sh = shared.clone();
         let (rc2, on) = (rc.clone(), ring_on.clone());
@@ -460,9 +464,11 @@ impl Recorder {
 }
 
 /// Writes one snapshot now (`fme snapshot`): the frame with `pipeline`'s results on it and its
-/// metric depth map into `dir`, keeping `keep`. Returns the JPEG's path.
+/// metric depth map into `dir`, keeping `keep`; the top bar names the camera of `source`. Returns
+/// the JPEG's path.
 pub fn snapshot_now(
     dir: &Path,
+    source: &Path,
     frame: &Frame,
     pipeline: &dyn Pipeline,
     sample: Option<&ActivitySample>,
@@ -473,5 +479,6 @@ pub fn snapshot_now(
     let mut depth = Vec::new();
     let has_depth = pipeline.depth_grid((frame.width, frame.height), snapshot::DEPTH_GRID, &mut depth);
     let name = format!("{}-{:08}", freeze::utc_stamp(std::time::SystemTime::now()), frame.seq);
-    snapshot::write(dir, &name, frame, &view, sample, has_depth.then_some(depth.as_slice()), keep)
+    let caption = snapshot::Caption::now(source, sample);
+    snapshot::write(dir, &name, frame, &view, &caption, has_depth.then_some(depth.as_slice()), keep)
 }

@@ -7,7 +7,6 @@ use crate::support;
 use fme::capture::{FrameSource, RecordedSource};
 use fme::service::{Daemon, RunOptions};
 use serialport::SerialPort;
-use std::io::Read as _;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
