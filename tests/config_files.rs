@@ -13,19 +13,24 @@ fn shipped_config_equals_defaults() {
 
 /// config/fme.toml with the `[tracker]` section's commented-out keys (the preset's values, shown for
 /// reference) written in.
-fn shipped_with_tracker_keys() -> String {
+fn shipped_with_commented_keys() -> String {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/fme.toml");
     let text = std::fs::read_to_string(&p).expect("read");
-    let mut in_tracker = false;
+    let (mut in_tracker, mut in_model) = (false, false);
     let mut out = String::new();
     for l in text.lines() {
         if l.starts_with('[') {
             in_tracker = l.starts_with("[tracker");
+            in_model = l == "[detector]" || l == "[depth]";
         }
         let key_like =
             |t: &str| t.split_once(" = ").is_some_and(|(k, _)| k.chars().all(|c| c.is_ascii_lowercase() || c == '_'));
+        // The model keys are commented out so that each build's own default applies (int8 with
+        // ONNX Runtime, fp32 in the static binary); the commented value is the ONNX Runtime one.
+        let model_key = |t: &str| t.starts_with("model = ");
         match l.strip_prefix("# ") {
             Some(t) if in_tracker && (key_like(t) || t == "[tracker.noise]") => out.push_str(t),
+            Some(t) if in_model && model_key(t) => out.push_str(t),
             _ => out.push_str(l),
         }
         out.push('\n');
@@ -34,7 +39,7 @@ fn shipped_with_tracker_keys() -> String {
 }
 
 /// Every key of the built-in defaults is written in config/fme.toml (the tracker's as commented-out
-/// preset values), none left to be discovered; those commented values are the defaults; and
+/// preset values, the models as commented-out paths), none left to be discovered; those commented values are the defaults; and
 /// `fme config show` prints a config that reads back equal.
 #[test]
 fn shipped_config_spells_out_every_key() {
@@ -48,7 +53,7 @@ fn shipped_config_spells_out_every_key() {
     }
     let shown = Config::default().to_toml();
     let defaults: toml::Table = toml::from_str(&shown).expect("config show is TOML");
-    let spelled = shipped_with_tracker_keys();
+    let spelled = shipped_with_commented_keys();
     let file: toml::Table = toml::from_str(&spelled).expect("TOML");
     let (mut want, mut have) = (Vec::new(), Vec::new());
     keys(&defaults, "", &mut want);

@@ -452,7 +452,7 @@ pub fn families(s: &Snapshot, e: &mut Exposition) {
     e.counter_by("fme_metrics_http_responses_total", "Responses of this endpoint by status code.", "code", &by_code);
     e.counter(
         "fme_metrics_connections_refused_total",
-        "Connections to this endpoint closed at accept (connection limits, output.metrics.allow).",
+        "Connections to this endpoint closed at accept (connection limits, output.metrics.allow) or to make room for a steady scraper.",
         *refused,
     );
     e.counter(
