@@ -124,7 +124,9 @@ async fn a_freeze_killed_midway_leaves_no_partial_after_a_restart() {
     let pipeline = support::edge_pipeline(&cfg);
     let daemon = Daemon::start(cfg, String::new(), source, pipeline, RunOptions::default()).await.expect("start");
     let deadline = Instant::now() + Duration::from_secs(10);
-    while !partials(&recordings).is_empty() && Instant::now() < deadline {
+    // The folder goes first, the log line right after it: wait for both.
+    let logged = |d: &Daemon| d.shared().last_logs(50).iter().any(|l| l.contains("unfinished recording"));
+    while !(partials(&recordings).is_empty() && logged(&daemon)) && Instant::now() < deadline {
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
     let left = partials(&recordings);
