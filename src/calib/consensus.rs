@@ -50,8 +50,7 @@ pub fn fit_limit(dof: usize) -> f64 {
 
 /// Reference `r`'s pixel covariance under `cam` from the stated noise; `None` behind the camera.
 pub fn pixel_covariance(cam: &crate::geometry::Camera, r: &Reference, opts: &Options) -> Option<Matrix2<f64>> {
-    let jw = pnp::world_jacobian(cam, &r.world.0)?;
-    Some(Matrix2::identity() * opts.click_px.powi(2) + jw * jw.transpose() * opts.tape_m.powi(2))
+    opts.noise().pixel_covariance(cam, &r.world.0)
 }
 
 /// Marked minus projected pixel; `None` behind the camera.
@@ -86,7 +85,8 @@ pub fn min_references(estimate_k: bool) -> usize {
 }
 
 /// Leave-one-out consensus: each reference predicted by the camera refined (from the full
-/// solution) on all the others. Among the references whose others fit within the stated noise
+/// solution) on all the others, by the same maximum-likelihood fit as the full solution
+/// ([`pnp::refine_ml`]). Among the references whose others fit within the stated noise
 /// (weighted residual sum under [`fit_limit`]), the one whose miss is the most sigmas off is named
 /// when its Mahalanobis distance squared exceeds the chi-square(2) quantile at
 /// [`NAME_FALSE_ALARM`]. With fewer than [`min_references`], nothing can be named.
@@ -102,7 +102,7 @@ pub fn consensus(refs: &[Reference], sol: &Solution, opts: &Options) -> Option<C
         let others: Vec<Reference> = refs.iter().enumerate().filter(|&(j, _)| j != i).map(|(_, r)| r.clone()).collect();
         let w: Vec<Vector3<f64>> = others.iter().map(|r| r.world.0).collect();
         let px: Vec<crate::geometry::Pixel> = others.iter().map(|r| r.pixel).collect();
-        let cam = pnp::refine(&sol.camera, &w, &px, est);
+        let cam = pnp::refine_ml(&sol.camera, &w, &px, est, &opts.noise());
         let (chi2, dof) = fit_chi2(&cam, &others, est, opts);
         if chi2.is_nan() || chi2 > fit_limit(dof) {
             continue;

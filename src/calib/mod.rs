@@ -4,8 +4,10 @@
 //! reads (docs/calibration.md), with the reference objects the metric depth fit uses (paper eq. 1-2).
 //!
 //! Method (see [`pnp`]): a linear start (normalised DLT for six or more non-coplanar references, a
-//! plane homography otherwise, with sampled rotations as a fallback), Levenberg-Marquardt on the
-//! reprojection error in pixels, then a leave-one-out consensus step ([`consensus`]): each
+//! plane homography otherwise, with sampled rotations as a fallback; without intrinsics also the
+//! DLT pose at a few sampled focal lengths), Levenberg-Marquardt on the reprojection error weighted
+//! by each reference's pixel covariance under the stated noise (the maximum-likelihood camera,
+//! [`pnp::refine_ml`]), then a leave-one-out consensus step ([`consensus`]): each
 //! reference is predicted by the camera solved from all the others, and one whose miss is more
 //! sigmas off than the stated measurement noise (`--click-px`, `--tape-m`) allows, carried through
 //! that camera's uncertainty, is named as mis-measured while the others fit. This is the
@@ -185,6 +187,18 @@ pub struct Options {
     pub height: u32,
 }
 
+impl Options {
+    /// The stated measurement noise.
+    pub fn noise(&self) -> pnp::Noise {
+        pnp::Noise { click_px: self.click_px, tape_m: self.tape_m }
+    }
+}
+
+/// Horizontal fields of view, degrees, whose focal lengths (principal point at the image centre)
+/// also start the refinement without intrinsics: the pixel DLT's focal length and principal point
+/// absorb the noise of few references and can start it in a worse basin than a guessed camera.
+const SAMPLED_HFOV_DEG: [f64; 5] = [40.0, 60.0, 80.0, 100.0, 120.0];
+
 /// One reference under a camera.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Residual {
@@ -286,10 +300,12 @@ fn non_coplanarity(w: &[Vector3<f64>]) -> f64 {
     sv[2] / sv[0].max(1e-12)
 }
 
-/// Solves without the consensus step: linear start, then Levenberg-Marquardt.
-fn solve_once(refs: &[Reference], intrinsics: Option<&Intrinsics>) -> Result<Solution, CalibError> {
+/// Solves without the consensus step: linear start(s), then the maximum-likelihood refinement;
+/// of several starts the one with the smallest weighted residual sum is kept.
+fn solve_once(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Options) -> Result<Solution, CalibError> {
     let w: Vec<Vector3<f64>> = refs.iter().map(|r| r.world.0).collect();
     let px: Vec<Pixel> = refs.iter().map(|r| r.pixel).collect();
+    let noise = opts.noise();
     let spread = non_coplanarity(&w);
     let (start_cam, start, estimate_k) = match intrinsics {
         Some(k) => {
@@ -322,19 +338,39 @@ fn solve_once(refs: &[Reference], intrinsics: Option<&Intrinsics>) -> Result<Sol
             (cam, "dlt", true)
         }
     };
-    let mut camera = pnp::refine(&start_cam, &w, &px, estimate_k);
-    let (_, mut rms_px) = residuals(&camera, refs);
+    // A first unweighted pass brings the start near the data, where the weights mean something.
+    let mut camera = pnp::refine_ml(&pnp::refine(&start_cam, &w, &px, estimate_k), &w, &px, estimate_k, &noise);
+    let mut cost = noise.chi2(&camera, &w, &px);
     let mut start = start;
+    if estimate_k {
+        let (cx, cy) = (0.5 * f64::from(opts.width), 0.5 * f64::from(opts.height));
+        for hfov in SAMPLED_HFOV_DEG {
+            let f = 0.5 * f64::from(opts.width) / (0.5 * hfov.to_radians()).tan();
+            let k = Intrinsics { fx: f, fy: f, cx, cy, distortion: [0.0; 5] };
+            let norm: Vec<(f64, f64)> = px.iter().map(|p| ((p.u - cx) / f, (p.v - cy) / f)).collect();
+            let Some(pose) = pnp::dlt(&w, &norm).and_then(|p| pnp::pose_from_normalised_dlt(&p)) else { continue };
+            let c0 = pnp::refine(&Camera { intrinsics: k, pose }, &w, &px, false);
+            let c = pnp::refine_ml(&pnp::refine(&c0, &w, &px, true), &w, &px, true, &noise);
+            let r = noise.chi2(&c, &w, &px);
+            if r < cost && c.intrinsics.validate().is_ok() {
+                camera = c;
+                cost = r;
+                start = "dlt at a sampled focal length";
+            }
+        }
+    }
+    let (_, rms_px) = residuals(&camera, refs);
     // Few references off a plane (no exact linear start), or a start that did not reach the data:
     // also refine from sampled rotations and keep the best (an outlier makes this run; it is cheap).
     if let (Some(k), true) = (intrinsics, start != "dlt" || rms_px > 1.0) {
         let norm: Vec<(f64, f64)> = px.iter().map(|p| k.undistort((p.u - k.cx) / k.fx, (p.v - k.cy) / k.fy)).collect();
         for pose in pnp::sampled_starts(&w, &norm, 2000, 8) {
             let c = pnp::refine(&Camera { intrinsics: *k, pose }, &w, &px, false);
-            let (_, r) = residuals(&c, refs);
-            if r < rms_px {
+            let c = pnp::refine_ml(&c, &w, &px, false, &noise);
+            let r = noise.chi2(&c, &w, &px);
+            if r < cost {
                 camera = c;
-                rms_px = r;
+                cost = r;
                 start = "sampled rotations";
             }
         }
@@ -350,7 +386,7 @@ fn solve_once(refs: &[Reference], intrinsics: Option<&Intrinsics>) -> Result<Sol
 /// `fx = fy`, `cx`, `cy` as well (six or more non-coplanar references).
 pub fn calibrate(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Options) -> Result<Solution, CalibError> {
     check_geometry(refs, opts)?;
-    let sol = solve_once(refs, intrinsics)?;
+    let sol = solve_once(refs, intrinsics, opts)?;
     if let Some(e) = consensus(refs, &sol, opts) {
         return Err(e);
     }

@@ -15,9 +15,14 @@
 //! - [`refine`]: Levenberg-Marquardt (Marquardt 1963; H&Z appendix A6.2) on the reprojection error
 //!   in pixels through [`Intrinsics::project`] (distortion included). The rotation is updated by a
 //!   local axis-angle increment `R <- exp([w]x) R`, so there is no singularity at any attitude.
+//! - [`refine_ml`]: the same on the whitened residuals `L_j^-1 r_j` (`S_j = L_j L_j^T` the pixel
+//!   covariance of reference j under the stated click and tape noise, see [`Noise`]), re-weighted
+//!   from the current camera between passes: the maximum-likelihood camera under that noise. Tape
+//!   error on a near reference is several pixels and on a far one a fraction of one, so equal
+//!   pixel weights let the near ones pull the pose.
 
 use crate::geometry::{Camera, Intrinsics, Pixel, Pose};
-use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x4, Rotation3, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Matrix3x4, Rotation3, Vector3};
 
 /// Hartley's isotropic normalisation of 2D points: centroid to the origin, mean distance sqrt(2).
 /// Returns the transform `T` (3x3) and the transformed points.
@@ -260,17 +265,96 @@ pub fn sampled_starts(world: &[Vector3<f64>], img: &[(f64, f64)], count: usize, 
     best.into_iter().map(|(_, p)| p).collect()
 }
 
-/// Pixel residuals `projected - measured` (u then v per point); a point behind the camera costs a
-/// large constant so the optimiser moves away from it.
-fn residuals(cam: &Camera, world: &[Vector3<f64>], px: &[Pixel], out: &mut DVector<f64>) {
+/// Pixel residuals `projected - measured` (u then v per point), each pre-multiplied by its
+/// whitening matrix when `weights` are given; a point behind the camera costs a large constant so
+/// the optimiser moves away from it.
+fn residuals(
+    cam: &Camera,
+    world: &[Vector3<f64>],
+    px: &[Pixel],
+    weights: Option<&[Matrix2<f64>]>,
+    out: &mut DVector<f64>,
+) {
     for (i, (w, m)) in world.iter().zip(px).enumerate() {
         let (du, dv) = match cam.intrinsics.project(&cam.pose.to_camera(&crate::geometry::WorldPoint(*w))) {
             Ok(p) => (p.u - m.u, p.v - m.v),
             Err(_) => (1e4, 1e4),
         };
-        out[2 * i] = du;
-        out[2 * i + 1] = dv;
+        let r = match weights.and_then(|ws| ws.get(i)) {
+            Some(wm) => wm * nalgebra::Vector2::new(du, dv),
+            None => nalgebra::Vector2::new(du, dv),
+        };
+        out[2 * i] = r.x;
+        out[2 * i + 1] = r.y;
     }
+}
+
+/// The stated measurement noise: each marked pixel off by `click_px` per axis and each measured
+/// face centre by `tape_m` per axis (independent, Gaussian).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Noise {
+    /// Pixels per axis (standard deviation).
+    pub click_px: f64,
+    /// Metres per axis (standard deviation).
+    pub tape_m: f64,
+}
+
+impl Noise {
+    /// Pixel covariance of a reference at `world` under `cam`: `click^2 I + tape^2 Jw Jw^T`;
+    /// `None` when it is at or behind the camera.
+    pub fn pixel_covariance(&self, cam: &Camera, world: &Vector3<f64>) -> Option<Matrix2<f64>> {
+        let jw = world_jacobian(cam, world)?;
+        Some(Matrix2::identity() * self.click_px.powi(2) + jw * jw.transpose() * self.tape_m.powi(2))
+    }
+
+    /// Whitening matrices `L_j^-1` (`S_j = L_j L_j^T`) of the points under `cam`, so that
+    /// `|L_j^-1 r_j|^2 = r_j^T S_j^-1 r_j`. A point behind the camera gets the click noise alone.
+    pub fn whitening(&self, cam: &Camera, world: &[Vector3<f64>]) -> Vec<Matrix2<f64>> {
+        let click = Matrix2::identity() / self.click_px.max(1e-12);
+        world
+            .iter()
+            .map(|w| {
+                self.pixel_covariance(cam, w)
+                    .and_then(|s| s.cholesky())
+                    .and_then(|c| c.l().try_inverse())
+                    .filter(|m| m.iter().all(|v| v.is_finite()))
+                    .unwrap_or(click)
+            })
+            .collect()
+    }
+
+    /// The weighted residual sum `sum_j r_j^T S_j^-1 r_j` of the points under `cam` (infinite
+    /// when one is behind it).
+    pub fn chi2(&self, cam: &Camera, world: &[Vector3<f64>], px: &[Pixel]) -> f64 {
+        world
+            .iter()
+            .zip(px)
+            .map(|(w, m)| {
+                let (Ok(p), Some(s)) =
+                    (cam.world_to_pixel(&crate::geometry::WorldPoint(*w)), self.pixel_covariance(cam, w))
+                else {
+                    return f64::INFINITY;
+                };
+                let e = nalgebra::Vector2::new(m.u - p.u, m.v - p.v);
+                s.try_inverse().map_or(f64::INFINITY, |inv| (e.transpose() * inv * e)[(0, 0)])
+            })
+            .sum()
+    }
+}
+
+/// Passes of [`refine_ml`]: each re-evaluates the weights at the camera of the one before (the
+/// pixel covariances change little once the pose is within centimetres, so three settle them).
+const ML_PASSES: usize = 3;
+
+/// Maximum-likelihood refinement under `noise`: [`refine`] on the whitened residuals, the
+/// whitening re-evaluated from the current camera before each of [`ML_PASSES`] passes.
+pub fn refine_ml(start: &Camera, world: &[Vector3<f64>], px: &[Pixel], estimate_k: bool, noise: &Noise) -> Camera {
+    let mut cam = *start;
+    for _ in 0..ML_PASSES {
+        let w = noise.whitening(&cam, world);
+        cam = refine_weighted(&cam, world, px, estimate_k, Some(&w));
+    }
+    cam
 }
 
 /// The camera after applying parameter increment `d` (`[w(3), dt(3), df, dcx, dcy]`) to `cam`.
@@ -336,11 +420,23 @@ pub fn world_jacobian(cam: &Camera, world: &Vector3<f64>) -> Option<nalgebra::Ma
 /// `cx`, `cy` (needs six or more non-coplanar points to be determined). Returns the refined camera
 /// (the rotation re-orthonormalised).
 pub fn refine(start: &Camera, world: &[Vector3<f64>], px: &[Pixel], estimate_k: bool) -> Camera {
+    refine_weighted(start, world, px, estimate_k, None)
+}
+
+/// [`refine`] minimising `sum_j |W_j r_j|^2` with one 2x2 weight `W_j` per point (`None`: the
+/// identity).
+pub fn refine_weighted(
+    start: &Camera,
+    world: &[Vector3<f64>],
+    px: &[Pixel],
+    estimate_k: bool,
+    weights: Option<&[Matrix2<f64>]>,
+) -> Camera {
     let np = parameter_count(estimate_k);
     let nr = 2 * world.len();
     let mut cam = *start;
     let mut r = DVector::zeros(nr);
-    residuals(&cam, world, px, &mut r);
+    residuals(&cam, world, px, weights, &mut r);
     let mut cost = r.norm_squared();
     let mut mu = 1e-3;
     let mut j = DMatrix::zeros(nr, np);
@@ -352,9 +448,9 @@ pub fn refine(start: &Camera, world: &[Vector3<f64>], px: &[Pixel], estimate_k: 
             let h = if k < 6 { 1e-6 } else { 1e-4 };
             let mut d = [0.0; 9];
             d[k] = h;
-            residuals(&apply(&cam, &d[..np]), world, px, &mut rp);
+            residuals(&apply(&cam, &d[..np]), world, px, weights, &mut rp);
             d[k] = -h;
-            residuals(&apply(&cam, &d[..np]), world, px, &mut rm);
+            residuals(&apply(&cam, &d[..np]), world, px, weights, &mut rm);
             j.set_column(k, &((&rp - &rm) / (2.0 * h)));
         }
         let jtj = j.transpose() * &j;
@@ -370,7 +466,7 @@ pub fn refine(start: &Camera, world: &[Vector3<f64>], px: &[Pixel], estimate_k: 
                 continue;
             };
             let trial = apply(&cam, step.as_slice());
-            residuals(&trial, world, px, &mut rp);
+            residuals(&trial, world, px, weights, &mut rp);
             let c = rp.norm_squared();
             if c.is_finite() && c < cost {
                 let small = step.norm() < 1e-12 || (cost - c) < 1e-14 * cost.max(1e-30);
