@@ -86,18 +86,21 @@ pub fn min_references(estimate_k: bool) -> usize {
 
 /// Leave-one-out consensus: each reference predicted by the camera refined (from the full
 /// solution) on all the others, by the same maximum-likelihood fit as the full solution
-/// ([`pnp::refine_ml`]). Among the references whose others fit within the stated noise
-/// (weighted residual sum under [`fit_limit`]), the one whose miss is the most sigmas off is named
-/// when its Mahalanobis distance squared exceeds the chi-square(2) quantile at
-/// [`NAME_FALSE_ALARM`]. With fewer than [`min_references`], nothing can be named.
+/// ([`pnp::refine_ml`]). A reference is a candidate when its others fit within the stated noise
+/// (weighted residual sum under [`fit_limit`]) and its Mahalanobis distance squared exceeds the
+/// chi-square(2) quantile at [`NAME_FALSE_ALARM`]; of the candidates, the one whose others fit best
+/// (smallest weighted residual sum) is named. Not the one most sigmas off: without intrinsics a
+/// moved reference pulls the fitted camera so far that a good one left out can miss by more, while
+/// only the set without the moved one is consistent. With fewer than [`min_references`], nothing
+/// can be named.
 pub fn consensus(refs: &[Reference], sol: &Solution, opts: &Options) -> Option<CalibError> {
     let est = sol.estimated_intrinsics;
     if refs.len() < min_references(est) {
         return None;
     }
     let limit = chi2_2_quantile(NAME_FALSE_ALARM);
-    // (index, distance squared, miss px, sigma px along the miss, others' RMS px)
-    let mut worst: Option<(usize, f64, f64, f64, f64)> = None;
+    // (index, distance squared, miss px, sigma px along the miss, others' RMS px, others' chi-square)
+    let mut worst: Option<(usize, f64, f64, f64, f64, f64)> = None;
     for i in 0..refs.len() {
         let others: Vec<Reference> = refs.iter().enumerate().filter(|&(j, _)| j != i).map(|(_, r)| r.clone()).collect();
         let w: Vec<Vector3<f64>> = others.iter().map(|r| r.world.0).collect();
@@ -118,12 +121,12 @@ pub fn consensus(refs: &[Reference], sol: &Solution, opts: &Options) -> Option<C
             }
             _ => (f64::INFINITY, f64::INFINITY),
         };
-        if d2 > limit && worst.is_none_or(|(_, wd2, ..)| d2 > wd2) {
+        if d2 > limit && worst.is_none_or(|(.., wchi2)| chi2 < wchi2) {
             let (_, rms) = super::residuals(&cam, &others);
-            worst = Some((i, d2, e_px, e_px / d2.sqrt(), rms));
+            worst = Some((i, d2, e_px, e_px / d2.sqrt(), rms, chi2));
         }
     }
-    worst.map(|(i, d2, error_px, sigma_px, others_rms_px)| CalibError::Outlier {
+    worst.map(|(i, d2, error_px, sigma_px, others_rms_px, _)| CalibError::Outlier {
         label: refs[i].label(),
         error_px,
         sigmas: d2.sqrt(),
