@@ -563,7 +563,7 @@ fn accuracy_table() {
                         if t.unsolved.is_empty() { String::new() } else { format!(" ({} unsolved)", t.unsolved.len()) },
                         t.named.iter().filter(|&&x| x).count(),
                     );
-                    for f in t.false_rejections.iter().chain(&t.unsolved) {
+                    for f in t.false_rejections.iter().chain(&t.unsolved).chain(&t.misses) {
                         eprintln!("  {f}");
                     }
                 }

@@ -86,7 +86,7 @@ pub fn min_references(estimate_k: bool) -> usize {
 
 /// Leave-one-out consensus: each reference predicted by the camera refined (from the full
 /// solution) on all the others, by the same maximum-likelihood fit as the full solution
-/// ([`pnp::refine_ml`]). A reference is a candidate when its others fit within the stated noise
+/// ([`pnp::refine_ml`]; solved afresh too when the others do not fit from there). A reference is a candidate when its others fit within the stated noise
 /// (weighted residual sum under [`fit_limit`]) and its Mahalanobis distance squared exceeds the
 /// chi-square(2) quantile at [`NAME_FALSE_ALARM`]; of the candidates, the one whose others fit best
 /// (smallest weighted residual sum) is named. Not the one most sigmas off: without intrinsics a
@@ -105,8 +105,20 @@ pub fn consensus(refs: &[Reference], sol: &Solution, opts: &Options) -> Option<C
         let others: Vec<Reference> = refs.iter().enumerate().filter(|&(j, _)| j != i).map(|(_, r)| r.clone()).collect();
         let w: Vec<Vector3<f64>> = others.iter().map(|r| r.world.0).collect();
         let px: Vec<crate::geometry::Pixel> = others.iter().map(|r| r.pixel).collect();
-        let cam = pnp::refine_ml(&sol.camera, &w, &px, est, &opts.noise());
-        let (chi2, dof) = fit_chi2(&cam, &others, est, opts);
+        let mut cam = pnp::refine_ml(&sol.camera, &w, &px, est, &opts.noise());
+        let (mut chi2, dof) = fit_chi2(&cam, &others, est, opts);
+        if !(chi2 <= fit_limit(dof)) {
+            // A moved reference can pull the full solution (focal length and principal point
+            // too) into a basin the others' optimum is not reached from: solve them afresh.
+            let k = (!est).then_some(sol.camera.intrinsics);
+            if let Ok(fresh) = super::solve_once(&others, k.as_ref(), opts) {
+                let (c, _) = fit_chi2(&fresh.camera, &others, est, opts);
+                if c < chi2 {
+                    cam = fresh.camera;
+                    chi2 = c;
+                }
+            }
+        }
         if chi2.is_nan() || chi2 > fit_limit(dof) {
             continue;
         }
