@@ -107,7 +107,7 @@ pub fn consensus(refs: &[Reference], sol: &Solution, opts: &Options) -> Option<C
         let px: Vec<crate::geometry::Pixel> = others.iter().map(|r| r.pixel).collect();
         let mut cam = pnp::refine_ml(&sol.camera, &w, &px, est, &opts.noise());
         let (mut chi2, dof) = fit_chi2(&cam, &others, est, opts);
-        if !(chi2 <= fit_limit(dof)) {
+        if chi2.is_nan() || chi2 > fit_limit(dof) {
             // A moved reference can pull the full solution (focal length and principal point
             // too) into a basin the others' optimum is not reached from: solve them afresh.
             let k = (!est).then_some(sol.camera.intrinsics);
