@@ -276,5 +276,17 @@ def pick(models, stem, res, log):
     log(f"{stem}: kept int8 {tag}")
 
 
+def finish(out, stem, res, log, log_lines, t0):
+    """The recipes' common end: keeps the faster int8 variant, writes OUT/metrics.json (with the torch
+    version and the log) and logs where the files are."""
+    pick(out, stem, res, log)
+    res["torch"] = torch.__version__
+    res["log"] = log_lines
+    with open(os.path.join(out, "metrics.json"), "w") as f:
+        json.dump(res, f, indent=1)
+    log(f"done in {time.time() - t0:.0f} s: {stem}_fp32.onnx, {stem}_int8.onnx ({res['int8_kept']}), metrics.json "
+        f"in {out}")
+
+
 if __name__ == "__main__":
     main()

@@ -26,7 +26,6 @@ import os
 os.environ.setdefault("FME_NET", "480x288")  # before `data` reads it: the bundled depth network's input
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import math  # noqa: E402
 import time  # noqa: E402
 
@@ -42,7 +41,7 @@ import evaluate  # noqa: E402
 import real  # noqa: E402
 from det import lr_at, train_forward, use_bf16  # noqa: E402
 from score_depth import held_out_sets  # noqa: E402
-from train import pick, quantize_and_time  # noqa: E402
+from train import finish, quantize_and_time  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 EVAL_SEQUENCE = "mf25-seq2"
@@ -317,12 +316,7 @@ def main():
     for tag, path in paths.items():
         res[tag] = dict(after[tag], size_mb=round(os.path.getsize(path) / 1e6, 2), ms_1_thread=ms[1][path],
                         ms_2_threads=ms[2][path])
-    pick(args.out, "fish_depth", res, log)
-    res["torch"] = torch.__version__
-    res["log"] = log_lines
-    with open(os.path.join(args.out, "metrics.json"), "w") as f:
-        json.dump(res, f, indent=1)
-    log(f"done in {time.time() - t0:.0f} s: {fp32}, fish_depth_int8.onnx ({res['int8_kept']}), metrics.json in {args.out}")
+    finish(args.out, "fish_depth", res, log, log_lines, t0)
 
 
 if __name__ == "__main__":

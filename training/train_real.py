@@ -17,7 +17,6 @@ trains on DIR's training part for --budget-s seconds at a lower learning rate, a
 DIR's held-out part (real.held_out: blocks of frames, not single frames) before and after.
 """
 import argparse
-import json
 import os
 import time
 
@@ -28,7 +27,7 @@ import data
 import det
 import evaluate
 import real
-from train import pick, quantize_and_time
+from train import finish, quantize_and_time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 CONFS = (0.2, 0.25, 0.3, 0.35, 0.4, 0.5)
@@ -160,12 +159,7 @@ def main():
     for tag, path in paths.items():
         res[tag] = {"size_mb": round(os.path.getsize(path) / 1e6, 2), "ms_1_thread": ms[1][path],
                     "ms_2_threads": ms[2][path], "quality": per_source_quality(path, val, args.nms_iou, log, tag)}
-    pick(args.out, "fish_det", res, log)
-    res["torch"] = torch.__version__
-    res["log"] = log_lines
-    with open(os.path.join(args.out, "metrics.json"), "w") as f:
-        json.dump(res, f, indent=1)
-    log(f"done in {time.time() - t0:.0f} s: {fp32}, fish_det_int8.onnx ({res['int8_kept']}), metrics.json in {args.out}")
+    finish(args.out, "fish_det", res, log, log_lines, t0)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ pub struct ReportArgs {
     #[arg(long, value_name = "YYYY-MM-DD", conflicts_with_all = ["from", "to"])]
     pub day: Option<String>,
     /// Start of the stretch to report, in the --tz zone: `YYYY-MM-DD`, `YYYY-MM-DD HH:MM[:SS]`, or
-    /// with an offset (`2026-12-04T06:00Z`). Alone: one day from it.
+    /// with an offset (`YYYY-MM-DDTHH:MMZ`, `...+01:00`). Alone: one day from it.
     #[arg(long, value_name = "TIME")]
     pub from: Option<String>,
     /// End of the stretch (exclusive), as --from. Alone: the day before it.

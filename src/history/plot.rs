@@ -359,7 +359,7 @@ mod tests {
 
     #[test]
     fn ticks_at_whole_local_hours_labelled_in_the_zone() {
-        let from = 1_796_342_400_000; // 2026-12-04T00:00Z
+        let from = 20_791 * 86_400_000; // a midnight, UTC
         let utc = TimeZone::UTC;
         let kolkata = TimeZone::fixed(jiff::tz::Offset::from_seconds(19_800).expect("offset"));
         let (t_utc, date) = time_ticks(from, from + 12 * 3_600_000, &utc);

@@ -241,11 +241,15 @@ mod tests {
         h
     }
 
+    fn publisher(cfg: &Config) -> Publisher {
+        let timing = super::super::timing::Timing::from_config(cfg).expect("default timing");
+        Publisher::new(cfg, &timing, Arc::new(RegisterBank::new()))
+    }
+
     #[test]
     fn unlike_fish_sets_bit_10_and_fault_7_and_the_feeding_rule_does_not_act() {
         let cfg = Config::default();
-        let timing = super::super::timing::Timing::from_config(&cfg).expect("default timing");
-        let mut p = Publisher::new(&cfg, &timing, Arc::new(RegisterBank::new()));
+        let mut p = publisher(&cfg);
         let t0 = Instant::now();
         let mut h = health(false, t0);
         h.started = t0;
@@ -284,8 +288,7 @@ mod tests {
     #[test]
     fn start_up_is_no_fault_until_the_camera_fails_or_stays_silent() {
         let cfg = Config::default();
-        let timing = super::super::timing::Timing::from_config(&cfg).expect("default timing");
-        let mut p = Publisher::new(&cfg, &timing, Arc::new(RegisterBank::new()));
+        let mut p = publisher(&cfg);
         let t0 = Instant::now();
         let mut h = Shared::new(String::new(), 4).health();
         h.started = t0;
@@ -300,7 +303,8 @@ mod tests {
         // A camera silent past service.stall_after_s, or one that failed, is a camera fault.
         let mut silent = Shared::new(String::new(), 4).health();
         silent.started = t0;
-        let late = t0 + timing.stall_after + Duration::from_secs(1);
+        let stall = super::super::timing::Timing::from_config(&cfg).expect("default timing").stall_after;
+        let late = t0 + stall + Duration::from_secs(1);
         assert_eq!(p.inputs(&silent, true, 0, late, false).fault, FaultCode::Camera);
         silent.capture_errors = 1;
         assert_eq!(p.inputs(&silent, true, 0, t0, false).fault, FaultCode::Camera);

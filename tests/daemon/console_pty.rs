@@ -32,6 +32,19 @@ pub(crate) fn reply(port: &mut dyn SerialPort, acc: &mut String) -> String {
     }
 }
 
+/// Waits up to 5 s for the greeting the console sends when it opens the device, then clears `acc`.
+pub(crate) fn greeting(port: &mut dyn SerialPort, acc: &mut String) {
+    let end = Instant::now() + Duration::from_secs(5);
+    let mut buf = [0u8; 256];
+    while !acc.contains("console ready") {
+        assert!(Instant::now() < end, "no greeting: {acc:?}");
+        if let Ok(n) = port.read(&mut buf) {
+            acc.push_str(&String::from_utf8_lossy(&buf[..n]));
+        }
+    }
+    acc.clear();
+}
+
 /// Sends a command; returns the reply without the echoed command line.
 pub(crate) fn ask(port: &mut dyn SerialPort, acc: &mut String, cmd: &str) -> String {
     port.write_all(cmd.as_bytes()).expect("write");
@@ -62,16 +75,7 @@ async fn console_commands_and_fuzz() {
     let result = tokio::task::spawn_blocking(move || {
         let port: &mut dyn SerialPort = &mut master;
         let mut acc = String::new();
-        // The greeting arrives when the console opens the device.
-        let end = Instant::now() + Duration::from_secs(5);
-        let mut buf = [0u8; 256];
-        while !acc.contains("console ready") {
-            assert!(Instant::now() < end, "no greeting: {acc:?}");
-            if let Ok(n) = port.read(&mut buf) {
-                acc.push_str(&String::from_utf8_lossy(&buf[..n]));
-            }
-        }
-        acc.clear();
+        greeting(port, &mut acc);
         std::thread::sleep(Duration::from_millis(400)); // let a few samples through
         let v = ask(port, &mut acc, "VERSION");
         assert!(v.contains(env!("CARGO_PKG_VERSION")) && v.ends_with("OK\r\n"), "{v:?}");
@@ -192,15 +196,7 @@ fn each_view_shows_one_update_and_regs_are_decoded() {
 
     let port: &mut dyn SerialPort = &mut master;
     let mut acc = String::new();
-    let end = Instant::now() + Duration::from_secs(5);
-    let mut buf = [0u8; 256];
-    while !acc.contains("console ready") {
-        assert!(Instant::now() < end, "no greeting: {acc:?}");
-        if let Ok(n) = port.read(&mut buf) {
-            acc.push_str(&String::from_utf8_lossy(&buf[..n]));
-        }
-    }
-    acc.clear();
+    greeting(port, &mut acc);
     let a = ask(port, &mut acc, "activity");
     assert!(a.contains("fish 5 ") && a.contains("too_few_fish") && a.contains("activity 0.200 m/s"), "{a:?}");
     assert!(!a.contains("fish 18") && !a.contains(" fault "), "{a:?}");

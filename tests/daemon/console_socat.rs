@@ -1,7 +1,7 @@
 //! The field console without a serial port: the socat line of README "Field console" links two
 //! pseudo-terminals, fme opens one as `console.device`, the technician the other.
 
-use crate::console_pty::ask;
+use crate::console_pty::{ask, greeting};
 use crate::support;
 
 use fme::capture::{FrameSource, RecordedSource};
@@ -61,15 +61,7 @@ async fn the_console_answers_through_a_socat_pty_pair() {
     let answered = tokio::task::spawn_blocking(move || {
         let port: &mut dyn SerialPort = tech.as_mut();
         let mut acc = String::new();
-        let end = Instant::now() + Duration::from_secs(5);
-        let mut buf = [0u8; 256];
-        while !acc.contains("console ready") {
-            assert!(Instant::now() < end, "no greeting through socat: {acc:?}");
-            if let Ok(n) = port.read(&mut buf) {
-                acc.push_str(&String::from_utf8_lossy(&buf[..n]));
-            }
-        }
-        acc.clear();
+        greeting(port, &mut acc);
         let v = ask(port, &mut acc, "version");
         assert!(v.contains(env!("CARGO_PKG_VERSION")) && v.ends_with("OK\r\n"), "{v:?}");
         let s = ask(port, &mut acc, "status");
