@@ -313,6 +313,45 @@ fn bad_input_exits_2_naming_the_problem() {
     assert!(err.contains("--out") && err.contains("no-such-folder"), "{err}");
 }
 
+/// `--source` also takes a recorded sequence, as `fme run --source` does: the grabbed frame is the
+/// recording's sixth (as from a camera, after exposure settles), and it solves in the same call.
+#[test]
+fn source_takes_a_recorded_sequence() {
+    let (m, truth) = meta();
+    let dir = tempfile::tempdir().unwrap();
+    let grabbed = dir.path().join("frame.png");
+    let o = fme(&["calibrate", "--source", SEQ, "--frame", grabbed.to_str().unwrap()]);
+    let (stdout, err) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{stdout}\n{err}");
+    assert!(stdout.contains("wrote") && stdout.contains("640x384"), "{stdout}");
+    let got = image::open(&grabbed).expect("grabbed PNG").to_rgb8();
+    let sixth = image::open(format!("{SEQ}/img1/000006.jpg")).unwrap().to_rgb8();
+    assert!(got == sixth, "the grabbed frame is not the recording's sixth");
+
+    let csv = write_csv(dir.path(), "points.csv", &references(&m, &truth, 0.5, 21));
+    let calib = dir.path().join("calib.json");
+    let o = fme(&[
+        "calibrate",
+        "--source",
+        SEQ,
+        "--frame",
+        grabbed.to_str().unwrap(),
+        "--points",
+        csv.to_str().unwrap(),
+        "--out",
+        calib.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(calib.is_file());
+
+    // A directory that is not there: exit 2, named.
+    let missing = dir.path().join("no-such-recording");
+    let o = fme(&["calibrate", "--source", missing.to_str().unwrap(), "--frame", grabbed.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("no-such-recording") && err.contains("not found"), "{err}");
+}
+
 /// Four or five references (no DLT; the plane-homography start is exact only for coplanar ones,
 /// sampled rotations cover the rest) still solve: every 4- and 5-subset of the ten, with
 /// intrinsics, noise-free, converges to the true pose.

@@ -22,9 +22,10 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "IMG")]
     pub frame: PathBuf,
     /// Grab the frame from this V4L2 camera (at `source.width` x `source.height` and
-    /// `source.format` of the configuration: --config, --set) and write it to --frame. Without
-    /// --points, stop there: mark the references on that image, then run again with --frame.
-    #[arg(long, value_name = "/dev/videoN")]
+    /// `source.format` of the configuration: --config, --set), or from a recorded sequence
+    /// directory, and write it to --frame. Without --points, stop there: mark the references on
+    /// that image, then run again with --frame.
+    #[arg(long, value_name = "/dev/videoN|DIR")]
     pub source: Option<PathBuf>,
     /// The configuration (only the `source` section is used, with --source).
     #[command(flatten)]
@@ -262,18 +263,30 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     write_stdout(&s)
 }
 
-/// Grabs one frame from a V4L2 camera (after a few to let exposure settle) and writes it to `out`.
-fn grab(dev: &Path, config: &super::ConfigArgs, out: &Path) -> anyhow::Result<image::RgbImage> {
-    use crate::capture::{CaptureError, FrameSource, V4l2Source};
-    let (cfg, _) = config.load(&[super::set_text("source.path", &dev.to_string_lossy())])?;
-    let mut cam = V4l2Source::new(cfg.source.clone());
-    cam.reopen().map_err(|e| match e {
+/// Grabs the sixth frame (after exposure settles) from a V4L2 camera or a recorded sequence
+/// (a path outside /dev, as `fme run --source` decides), and writes it to `out`.
+fn grab(src: &Path, config: &super::ConfigArgs, out: &Path) -> anyhow::Result<image::RgbImage> {
+    use crate::capture::{CaptureError, FrameSource, RecordedSource, V4l2Source};
+    let (cfg, _) = config.load(&[super::set_text("source.path", &src.to_string_lossy())])?;
+    let open_err = |e: CaptureError| match e {
         e @ (CaptureError::NotFound { .. } | CaptureError::Open { .. }) => usage(format!("--source: {e}")),
         e => anyhow::Error::new(e).context("--source"),
-    })?;
-    let mut f = cam.next_frame(Vec::new()).context("--source: grabbing a frame")?;
+    };
+    let mut source: Box<dyn FrameSource> = if src.starts_with("/dev") {
+        let mut cam = V4l2Source::new(cfg.source.clone());
+        cam.reopen().map_err(open_err)?;
+        Box::new(cam)
+    } else {
+        Box::new(RecordedSource::open(src, false, false).map_err(open_err)?)
+    };
+    let mut f = source.next_frame(Vec::new()).context("--source: grabbing a frame")?;
     for _ in 0..5 {
-        f = cam.next_frame(std::mem::take(&mut f.data)).context("--source: grabbing a frame")?;
+        match source.next_frame(Vec::new()) {
+            Ok(next) => f = next,
+            // A recording shorter than six frames: its last one.
+            Err(CaptureError::End) => break,
+            Err(e) => return Err(anyhow::Error::new(e).context("--source: grabbing a frame")),
+        }
     }
     let mut rgb = Vec::new();
     let (w, h) = f.to_rgb_into(&mut rgb).map_err(|e| anyhow::anyhow!("--source: decoding the frame: {e}"))?;

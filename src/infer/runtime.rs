@@ -4,9 +4,11 @@
 //! Library lookup order (first that loads wins):
 //! 1. `ORT_DYLIB_PATH` (if set, it must work: a wrong explicit path is an error, not a fallback);
 //! 2. `libonnxruntime.so` beside the executable;
-//! 3. the repository's `.ort/lib/libonnxruntime.so` (put there by `scripts/setup.sh`), with the
+//! 3. the install prefix's `lib/fme/libonnxruntime.so` (`make install`: `/usr/local/lib/fme/` for
+//!    `/usr/local/bin/fme`), so the installed executable run by hand finds the library the unit names;
+//! 4. the repository's `.ort/lib/libonnxruntime.so` (put there by `scripts/setup.sh`), with the
 //!    absolute path baked in at compile time so `target/release/fme` finds it with no variable set;
-//! 4. the system's dynamic-loader search path.
+//! 5. the system's dynamic-loader search path.
 
 #[cfg(feature = "ort")]
 pub use self::onnxruntime::*;
@@ -35,7 +37,7 @@ mod onnxruntime {
     /// Where the library is looked for, in order, given the value of `ORT_DYLIB_PATH` and the directory
     /// of the running executable. A pure function so the order is testable.
     pub fn library_candidates(env_path: Option<OsString>, exe_dir: Option<&Path>) -> Vec<(PathBuf, &'static str)> {
-        let mut out = Vec::with_capacity(4);
+        let mut out = Vec::with_capacity(5);
         if let Some(p) = env_path.filter(|p| !p.is_empty()) {
             out.push((PathBuf::from(p), "ORT_DYLIB_PATH"));
             // An explicit path is the user's choice: no silent fallback.
@@ -43,6 +45,9 @@ mod onnxruntime {
         }
         if let Some(dir) = exe_dir {
             out.push((dir.join(LIBRARY_NAME), "beside the executable"));
+            if let Some(prefix) = dir.parent() {
+                out.push((prefix.join("lib/fme").join(LIBRARY_NAME), "install prefix lib/fme"));
+            }
         }
         out.push((PathBuf::from(REPO_LIBRARY), "repository .ort/lib"));
         out.push((PathBuf::from(LIBRARY_NAME), "system library path"));
@@ -159,13 +164,16 @@ mod tests {
 
     #[cfg(feature = "ort")]
     #[test]
-    fn default_order_is_exe_dir_repo_system() {
+    fn default_order_is_exe_dir_install_prefix_repo_system() {
         let c = library_candidates(None, Some(Path::new("/srv/fme/bin")));
         let paths: Vec<_> = c.iter().map(|(p, _)| p.clone()).collect();
         assert_eq!(
             paths,
             vec![
                 PathBuf::from("/srv/fme/bin/libonnxruntime.so"),
+                // Where `make install` puts it: the installed fme run by hand (no unit, no
+                // ORT_DYLIB_PATH) on a box without the build's checkout.
+                PathBuf::from("/srv/fme/lib/fme/libonnxruntime.so"),
                 PathBuf::from(REPO_LIBRARY),
                 PathBuf::from("libonnxruntime.so")
             ]
