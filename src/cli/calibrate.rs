@@ -15,7 +15,8 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, clap::Args)]
 #[command(after_help = "Underwater behind a flat port the focal length is about 1.33x the in-air value (the \
                         refractive index of water): multiply in-air fx and fy by 1.33, or give no intrinsics \
-                        and let six or more non-coplanar references estimate them. See docs/calibration.md.")]
+                        and let ten or more non-coplanar references (six at the least) estimate them. See \
+                        docs/calibration.md.")]
 pub struct CalibrateArgs {
     /// The frame the references were marked on (PNG or JPEG); gives the image size and the overlay's
     /// background. With --source: where the grabbed frame is written.
@@ -36,7 +37,7 @@ pub struct CalibrateArgs {
     pub points: Option<PathBuf>,
     /// Intrinsics from any JSON file with a `camera` block (fx, fy, cx, cy, distortion): a calibration
     /// file or a sequence's meta.json. Without it and without --fx.., fx = fy, cx and cy are estimated
-    /// (six or more non-coplanar references).
+    /// (measure ten or more non-coplanar references; six at the least).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["fx", "fy", "cx", "cy"])]
     pub intrinsics: Option<PathBuf>,
     /// Focal length along u, pixels (with --fy --cx --cy; no distortion). Underwater behind a flat
