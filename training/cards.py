@@ -173,18 +173,63 @@ output is not bundled yet.
 """
 
 
+def real_depth_note(r):
+    """The fine-tune on real frames (`make -C training depth-real`), when the bundled files come from it."""
+    if not r:
+        return ""
+    a = r["args"]
+    held = ", ".join(f"{k} {v}" for k, v in r["data"]["held_out"].items())
+    cons = lambda tag: ", ".join(f"{k} {v['rho']:+.3f}" for k, v in r[tag]["consistency"].items() if v["rho"] is not None)
+    return f"""
+### Fine-tuned on real frames
+The files above were then fine-tuned (`make -C training depth-real`, `training/train_depth_real.py`; from
+the synthetic network, folded BatchNorms frozen) for {r['train_seconds']:.0f} s ({r['steps']} steps) with
+{a['batch']} renders (the loss above; half of them given a colour cast, haze, blur and noise) and
+{a['real_batch']} real images a step, peak learning rate {a['lr']:g}. On the real images, a ranking loss
+from the labelled box sizes (in one image, of two fish whose long sides differ by at least
+{a['ratio']}x, the longer one's inverse depth should be larger; weight {a['rank_weight']}):
+{r['data']['real_pairs']} pairs from {sum(r['data']['real_train'].values())} training images of the real pool
+(`../shared/realfish/train`, training splits; `jp-piers-partial` excluded), held out per source:
+{held}. Depth consistency (Spearman of inverse depth against box long side, mean over images) on the
+held-out images, before -> after, int8: {cons('before_int8')} -> {cons('int8_u8s8')}.
+docs/accuracy.md "Real footage" scores it on a real tank sequence.{one_core_note(r)}
+"""
+
+
+def one_core_note(r):
+    if r["args"].get("threads") != 1:
+        return ""
+    return ("\nThe timings below were taken inside that run, pinned to one core, so 2 threads gain nothing there\n"
+            "(`make bench-infer` times the files in fme).")
+
+
+def depth_licence(r):
+    if not r:
+        return "MIT OR Apache-2.0 (this project); synthetic training data from fme's own generator only."
+    return ("Weights and code: MIT OR Apache-2.0 (this project). Fine-tuned on real images under CC BY 4.0\n"
+            "(attribution as the licence asks; each source's `SOURCE.md` in `../shared/realfish/train` has the\n"
+            "details): Roboflow \"Aquarium Combined\" (Henry Doorly Zoo and National Aquarium photos);\n"
+            "Roboflow Universe `g18l5754/fish4knowledge-dataset` (a fixed coastal camera, 2020);\n"
+            "DeepFish (Saleh et al., Scientific Reports 10:14671, 2020), boxes from Roboflow Universe\n"
+            "`brrrrrrr/deepfish-fmyzf`; Roboflow Universe `detection-utzod/fish_motions` (lab zebrafish).\n"
+            "Only box sizes were used from the labels. No third-party weights.")
+
+
 def depth_card(m):
     d = m["depth"]
     data = d["data"]
     w, h = d.get("input", [320, 192])
     stopped = budget_note(d)
+    real = m.get("depth_real")
+    # The bundled files are the real-frames fine-tune when there is one: its own timings and scores.
+    files = real if real else d
     rows = []
     for tag in ("fp32", "int8_u8s8", "int8_s8s8"):
-        if tag not in d:
+        if tag not in files:
             continue
-        q = d[tag]["quality"]
-        rows.append(f"| {tag} | {d[tag]['size_mb']} | {ms(d[tag]['ms_1_thread'])} | {ms(d[tag]['ms_2_threads'])} | "
-                    f"{q['rmse_m']:.3f} | {q['delta_1.25']:.3f} | {q['n']} |")
+        q = files[tag].get("quality") or files[tag]["renders_metric"]
+        rows.append(f"| {tag} | {files[tag]['size_mb']} | {ms(files[tag]['ms_1_thread'])} | "
+                    f"{ms(files[tag]['ms_2_threads'])} | {q['rmse_m']:.3f} | {q['delta_1.25']:.3f} | {q['n']} |")
     return f"""# fish_depth: small relative-depth network (MiDaS convention)
 
 Files: `fish_depth_fp32.onnx` and `fish_depth_int8.onnx` (static int8, QDQ, {d.get('int8_kept', '?')} kept).
@@ -211,7 +256,7 @@ Rendered like the detector's (see fish_det.md): training seeds {data.get('train_
 from {len(data['train_sequences'])} sequences), held-out seeds {data.get('val_seeds')}. {recipe_cmd(d)}
 with `SKIP=det` for this model alone; {d['epochs']} epochs requested{stopped};
 training time {d['train_seconds']:.0f} s on the shared 2-core CPU that trained it{autocast_note(d)}{crop_note(d, depth_crop_detail(d))}.
-
+{real_depth_note(real)}
 ## Quality on the held-out sequences (layout of each sequence, A to F)
 Per frame, scale and shift are fitted in disparity space to the reference cubes' front-face centres
 (least squares), then depth at every fish with visibility >= 0.5 (ground-truth box centre, 3x3
@@ -221,10 +266,10 @@ median) is compared with the camera z of its body centre.
 |---|---|---|---|---|---|---|
 {chr(10).join(rows)}
 
-{timing_note(d)}
+{timing_note(files)}
 
 ## Licence
-MIT OR Apache-2.0 (this project); synthetic training data from fme's own generator only.
+{depth_licence(real)}
 """
 
 
