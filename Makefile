@@ -26,7 +26,7 @@ PREFIX ?= /usr/local
 install: build
 	PREFIX="$(PREFIX)" DESTDIR="$(DESTDIR)" BOARD="$(BOARD)" STRIP="$(STRIP)" bash scripts/install.sh $(BIN)
 
-# One static executable (issue 36): the pure-Rust backend (tract) and the bundled models inside,
+# One static executable: the pure-Rust backend (tract) and the bundled models inside,
 # glibc's static-pie; nothing else needed beside it (docs/deployment.md#one-static-binary). For an
 # aarch64 board: STATIC_TARGET=aarch64-unknown-linux-gnu STRIP=aarch64-linux-gnu-strip with the
 # target's std and a cross linker (see there).
@@ -85,7 +85,7 @@ bench: bench-synth bench-core bench-track bench-infer bench-daemon bench-history
 
 bench-synth: setup
 	$(CARGO) bench --locked --bench synth
-# Per-frame cost of post-processing + motion (issue 3); a benchmark, not a test.
+# Per-frame cost of post-processing + motion; a benchmark, not a test.
 bench-core:
 	$(CARGO) bench --locked --bench core
 # `fme run` on a recording (default: the bundled one) with a Modbus TCP server on 127.0.0.1:5020 and a
@@ -118,7 +118,7 @@ bench-infer: setup
 # pipeline's CPU at 30 fps, as ratios (docs/benchmarks.md#backends).
 bench-backends: setup
 	$(CARGO) bench --locked --features tract --bench backends
-# Issue 5's anchor models (YOLO11n) timed beside the bundled int8 files: this machine against the
+# The anchor models (YOLO11n) timed beside the bundled int8 files: this machine against the
 # anchors' (needs the ~6 GB Python stack of training/requirements.txt; not part of `bench`).
 bench-anchors:
 	bash scripts/anchor_timing.sh

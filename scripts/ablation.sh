@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Ablations of issue 3, the paper's experiments on our synthetic scenes:
+# Ablations: the paper's experiments on our synthetic scenes:
 #   group A  (GT boxes + GT depth) on a 20-fish swarm of 30 s and on a single fish (Tables 6-7 row A)
 #   post-processing on/off over the 18 postproc-suite scenes (Fig. 8)
 #   metric fits with relative-gt depth on the swarm (Table 4 analogue)

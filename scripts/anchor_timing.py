@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Times issue 5's reference models beside fme's bundled int8 networks, turn by turn, on this machine.
+"""Times the reference models beside fme's bundled int8 networks, turn by turn, on this machine.
 
-Issue 5 states its speed targets (detector <= 5 ms, depth <= 10 ms, int8, 2 threads) next to anchors
+The speed targets (detector <= 5 ms, depth <= 10 ms, int8, 2 threads) were set beside anchors
 measured on another machine (../shared/research/onnx-timings.md: a 2-vCPU Sapphire Rapids KVM guest,
 ONNX Runtime 1.31.1, default session options). Those anchors are rebuilt here the same way (YOLO11n
 with nc=1 from Ultralytics' yolo11n.yaml, random weights, opset 17, at 320 and 640; the 320 one

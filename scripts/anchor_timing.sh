@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 5's reference models (YOLO11n, random weights, as in ../shared/research/onnx-timings.md) timed
+# The reference models (YOLO11n, random weights, as in ../shared/research/onnx-timings.md) timed
 # turn by turn with the bundled int8 networks: how this machine compares with the one the issue's
 # anchors came from (scripts/anchor_timing.py). Needs the Python stack of training/requirements.txt in
 # $VENV (default /tmp/venv-infer; created if missing, a ~6 GB torch install from PyPI). A benchmark,

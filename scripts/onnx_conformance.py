@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Conformance with the real ONNX formats (issue 5): exports the YOLO11n architecture (Ultralytics,
+"""Conformance with the real ONNX formats: exports the YOLO11n architecture (Ultralytics,
 from yolo11n.yaml, random weights) and a Depth Anything V2 Small architecture (transformers config,
 random weights) to ONNX in OUT_DIR, runs them with ONNX Runtime on a test frame, and writes the
 reference results that `tests/infer_conformance.rs` (run with --ignored) compares fme against:

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Conformance of fme's ONNX decoding with real exports (issue 5): exports YOLO11n (Ultralytics,
+# Conformance of fme's ONNX decoding with real exports: exports YOLO11n (Ultralytics,
 # yolo11n.yaml) and Depth Anything V2 Small (transformers config), random weights, into
 # $FME_CONFORMANCE_DIR (default /tmp/fme-conformance, outside the repo: ~120 MB), then runs
 # tests/infer_conformance.rs against them. Needs the Python stack of training/requirements.txt in

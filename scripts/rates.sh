@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Detector/depth rates against accuracy and CPU (issue 32): group D (bundled models, the shipped
+# Detector/depth rates against accuracy and CPU: group D (bundled models, the shipped
 # config) on the held-out four-group sequences of one seed set, at several detector/depth rates and
 # with the networks on every frame. Prints a table; JSON per run in OUT/rates-SEED_BASE.
 # Usage: scripts/rates.sh [OUT_DIR]  (default target/four-groups; sequences are made by

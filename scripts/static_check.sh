@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The static binary of `make static` on its own (issue 36): `ldd` finds nothing dynamic, and it
+# The static binary of `make static` on its own: `ldd` finds nothing dynamic, and it
 # runs the bundled recording from an empty directory with only its configuration beside it: no
 # models/ folder, no .ort/lib, an empty environment. The default model paths must resolve to the
 # models embedded in the executable, the pipeline must measure activity, and a host name must

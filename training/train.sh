@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# One command that re-trains fme's models from scratch in about an hour on a 2-core CPU (issue 5):
+# One command that re-trains fme's models from scratch in about an hour on a 2-core CPU:
 #   bash training/train.sh            # or: make -C training all
 # (59 minutes on the AMD EPYC of docs/training.md "The one-hour recipe" with the full detector layout, about 60
 # with s8_48, rendering included, venv present).

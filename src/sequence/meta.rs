@@ -6,7 +6,7 @@ use crate::units::{Metres, Seconds};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-/// The contents of `meta.json` (issue 2). Unknown keys are ignored on reading, so later generator
+/// The contents of `meta.json`. Unknown keys are ignored on reading, so later generator
 /// versions may add fields without breaking older readers. Only `camera` is required: a real
 /// recording's file is a calibration (`fme calibrate` writes `camera`, `reference_objects`, `width`,
 /// `height`), without the synthetic scene's fields; `seqinfo.ini` is the authority for the frame

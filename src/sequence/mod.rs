@@ -1,6 +1,6 @@
 //! MOTChallenge sequences with fme's extras (`gt/world.csv`, `depth/`, `meta.json`): reader and writer.
 //!
-//! The on-disk layout of one sequence (issue 2):
+//! The on-disk layout of one sequence:
 //!
 //! ```text
 //! seqinfo.ini          [Sequence] name, imDir, frameRate, seqLength, imWidth, imHeight, imExt
