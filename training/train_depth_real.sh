@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The depth network on real frames (`make -C training depth-real`; docs/training.md "Depth on real
-# frames"): fine-tunes the bundled fp32 depth network (TRAIN_ARGS="--base FILE" for another: the
+# frames"): fine-tunes the bundled fp32 depth network (TRAIN_ARGS="--base FP32 --base-int8 INT8" for another: the
 # bundled files came from the synthetic-only network of `make -C training bundled`) on fme's renders (the scale- and shift-invariant
 # loss, a share given a real look) and a ranking loss on the real labelled images of REAL_DATA (default
 # ../shared/realfish/train: the longer of two fish in one image should be nearer), for BUDGET_S seconds
