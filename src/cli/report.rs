@@ -235,31 +235,31 @@ mod tests {
     #[test]
     fn time_range_follows_the_data_or_from_to_in_the_zone() {
         let dir = tempfile::tempdir().expect("tempdir");
-        let (d4, d5) = (day_ms("2026-12-04"), day_ms("2026-12-05"));
+        let (d4, d5) = (day_ms("2030-01-14"), day_ms("2030-01-15"));
         write(dir.path(), &[(d4 + 6 * H, d4 + 8 * H), (d5, d5 + 2 * H)]);
         let utc = TimeZone::UTC;
         // --day: the plot spans the day's rows.
-        let s = select(&args(dir.path(), Some("2026-12-04"), None, None), &utc).expect("day");
+        let s = select(&args(dir.path(), Some("2030-01-14"), None, None), &utc).expect("day");
         assert_eq!(s.range, (d4 + 6 * H, d4 + 8 * H - 600_000));
         assert_eq!(s.rows.len(), 12);
         // --from/--to in UTC: across the day files, `to` exclusive.
-        let a = args(dir.path(), None, Some("2026-12-04 07:00"), Some("2026-12-05T01:00"));
+        let a = args(dir.path(), None, Some("2030-01-14 07:00"), Some("2030-01-15T01:00"));
         let s = select(&a, &utc).expect("range");
         assert_eq!(s.range, (d4 + 7 * H, d5 + H));
-        assert_eq!(s.rows.len(), 6 + 6, "07:00-08:00 on the 4th, 00:00-01:00 on the 5th");
-        // The same wall times in +05:30 are 5.5 h earlier: only the 4th's rows.
+        assert_eq!(s.rows.len(), 6 + 6, "07:00-08:00 on the 14th, 00:00-01:00 on the 15th");
+        // The same wall times in +05:30 are 5.5 h earlier: only the 14th's rows.
         let s = select(&a, &parse_tz("+05:30").expect("tz")).expect("range");
         assert_eq!(s.range, (d4 + 7 * H - 11 * H / 2, d5 + H - 11 * H / 2));
         assert_eq!(s.rows.len(), 12, "{:?}", s.range);
         // --from alone: one day; an instant with an offset ignores --tz.
-        let s = select(&args(dir.path(), None, Some("2026-12-04T23:00Z"), None), &utc).expect("from");
+        let s = select(&args(dir.path(), None, Some("2030-01-14T23:00Z"), None), &utc).expect("from");
         assert_eq!(s.range, (d4 + 23 * H, d5 + 23 * H));
         // Empty or reversed stretches are errors naming the flags.
-        let e = select(&args(dir.path(), None, Some("2026-12-06"), None), &utc).expect_err("no rows");
+        let e = select(&args(dir.path(), None, Some("2030-01-16"), None), &utc).expect_err("no rows");
         assert!(e.to_string().contains("no history rows"), "{e}");
-        let e = select(&args(dir.path(), None, Some("2026-12-05"), Some("2026-12-04")), &utc).expect_err("reversed");
+        let e = select(&args(dir.path(), None, Some("2030-01-15"), Some("2030-01-14")), &utc).expect_err("reversed");
         assert!(e.to_string().contains("not before --to"), "{e}");
-        assert!(parse_when("--from", "04.12.2026", &utc).is_err());
+        assert!(parse_when("--from", "14.01.2030", &utc).is_err());
     }
 
     #[test]

@@ -349,11 +349,11 @@ mod tests {
     #[test]
     fn top_bar_says_what_where_and_when() {
         let cap =
-            Caption { sample: Some(sample(false)), camera: "cam0".into(), time: "2026-12-05 14:03:21 UTC".into() };
+            Caption { sample: Some(sample(false)), camera: "cam0".into(), time: "2030-01-15 14:03:21 UTC".into() };
         let parts: Vec<String> = bar_parts(Some(&sample(false)), 0, &cap).into_iter().map(|p| p.0).collect();
         assert_eq!(
             parts,
-            ["activity 0.402 m/s (1.21 BL/s)", "smoothed 0.390 m/s", "22 fish", "2026-12-05 14:03:21 UTC", "cam0"]
+            ["activity 0.402 m/s (1.21 BL/s)", "smoothed 0.390 m/s", "22 fish", "2030-01-15 14:03:21 UTC", "cam0"]
         );
         let parts = bar_parts(Some(&sample(true)), 0, &Caption::default());
         assert!(parts.iter().any(|p| p.0 == "depth NOT calibrated" && p.1 == BAD), "{parts:?}");
