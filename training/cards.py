@@ -179,7 +179,8 @@ def real_depth_note(r):
         return ""
     a = r["args"]
     held = ", ".join(f"{k} {v}" for k, v in r["data"]["held_out"].items())
-    cons = lambda tag: ", ".join(f"{k} {v['rho']:+.3f}" for k, v in r[tag]["consistency"].items() if v["rho"] is not None)
+    def cons(res):
+        return ", ".join(f"{k} {v['rho']:+.3f}" for k, v in res["consistency"].items() if v["rho"] is not None)
     return f"""
 ### Fine-tuned on real frames
 The files above were then fine-tuned (`make -C training depth-real`, `training/train_depth_real.py`; from
@@ -191,9 +192,9 @@ from the labelled box sizes (in one image, of two fish whose long sides differ b
 {r['data']['real_pairs']} pairs from {sum(r['data']['real_train'].values())} training images of the real pool
 (`../shared/realfish/train`, training splits; `jp-piers-partial` excluded), held out per source:
 {held}. Depth consistency (Spearman of inverse depth against box long side, mean over images) on the
-held-out images, before -> after, int8: {cons('before_int8')} -> {cons('int8_u8s8')}.
-docs/accuracy.md "Real footage" scores it on a real tank sequence; on fme's held-out four-group sequences it
-costs 0.02-0.08 m of depth at the fish against the synthetic-only network ("Depth at the fish").{one_core_note(r)}
+held-out images, before -> after, int8: {cons(r['before']['int8'])} -> {cons(r['int8_u8s8'])}.
+docs/accuracy.md scores it on a real tank sequence ("Real footage") and gives what it costs in depth at the
+fish on fme's held-out four-group sequences against the synthetic-only network ("Depth at the fish").{one_core_note(r)}
 """
 
 
@@ -233,7 +234,7 @@ def depth_card(m):
                     f"{ms(files[tag]['ms_2_threads'])} | {q['rmse_m']:.3f} | {q['delta_1.25']:.3f} | {q['n']} |")
     return f"""# fish_depth: small relative-depth network (MiDaS convention)
 
-Files: `fish_depth_fp32.onnx` and `fish_depth_int8.onnx` (static int8, QDQ, {d.get('int8_kept', '?')} kept).
+Files: `fish_depth_fp32.onnx` and `fish_depth_int8.onnx` (static int8, QDQ, {files.get('int8_kept', '?')} kept).
 
 ## Convention (MiDaS v2.1 small / Depth Anything V2)
 - Input `image` float32 `[1, 3, {h}, {w}]`: the frame resized to {w}x{h} (no aspect keep), RGB,
@@ -246,7 +247,7 @@ Files: `fish_depth_fp32.onnx` and `fish_depth_int8.onnx` (static int8, QDQ, {d.g
 U-Net-style encoder/decoder with 3x3-conv ReLU blocks (strides 2 to 32), output at half the input
 resolution, softplus. In the exported graph the last convolution (to one channel) is a depthwise
 convolution plus a channel sum, and softplus is Relu(x) + Log(1 + Exp(-|x|)) (`depth.fast_tail`:
-the same map up to float rounding, faster in ONNX Runtime); both stay in float in the int8 file.{upsample_note(d)}
+the same map up to float rounding, faster in ONNX Runtime); both stay in float in the int8 file.{upsample_note(files)}
 Trained with MiDaS' scale- and shift-invariant loss (median / mean absolute
 deviation normalisation, 20% trimmed L1, multi-scale gradient matching) on disparity 1/z from the
 generator's depth maps, plus a focus term (untrimmed L1 on the normalised maps over the fish box

@@ -93,11 +93,7 @@ def main():
     os.makedirs(args.models, exist_ok=True)
     metrics_path = args.metrics
     metrics = json.load(open(metrics_path)) if os.path.exists(metrics_path) else {}
-    log_lines = []
-
-    def log(msg):
-        print(msg, flush=True)
-        log_lines.append(msg)
+    log, log_lines = run_log()
 
     t0 = time.time()
     # Depth maps only when the depth network trains (the detector run at 288 sequences would hold ~0.3 GB).
@@ -274,6 +270,17 @@ def pick(models, stem, res, log):
         os.remove(os.path.join(models, f"{stem}_int8_{t}.onnx"))
     res["int8_kept"] = tag
     log(f"{stem}: kept int8 {tag}")
+
+
+def run_log():
+    """The recipes' log: `log(msg)` prints at once and keeps the line for metrics.json's "log"."""
+    lines = []
+
+    def log(msg):
+        print(msg, flush=True)
+        lines.append(msg)
+
+    return log, lines
 
 
 def finish(out, stem, res, log, log_lines, t0):

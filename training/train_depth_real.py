@@ -41,7 +41,7 @@ import evaluate  # noqa: E402
 import real  # noqa: E402
 from det import lr_at, train_forward, use_bf16  # noqa: E402
 from score_depth import held_out_sets  # noqa: E402
-from train import finish, quantize_and_time  # noqa: E402
+from train import finish, quantize_and_time, run_log  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 EVAL_SEQUENCE = "mf25-seq2"
@@ -276,11 +276,7 @@ def main():
     args = parse_args()
     torch.set_num_threads(args.threads)
     os.makedirs(args.out, exist_ok=True)
-    log_lines = []
-
-    def log(msg):
-        print(msg, flush=True)
-        log_lines.append(msg)
+    log, log_lines = run_log()
 
     t0 = time.time()
     check_input(args.base)

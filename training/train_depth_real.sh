@@ -27,17 +27,9 @@ FRAMES=${FRAMES:-24}
 [ -d "$REAL_DATA" ] || { echo "train_depth_real.sh: REAL_DATA=$REAL_DATA: no such folder" >&2; exit 2; }
 VENV="$VENV" bash "$ROOT/scripts/setup_training.sh"
 # Render only what is missing (the sequences train.sh and train_real.sh rendered are reused).
-if [ "$(find "$DATA/train" -maxdepth 2 -name seqinfo.ini 2>/dev/null | wc -l)" -lt "$SYNTH_SEQS" ] ||
-   [ "$(find "$DATA/val" -maxdepth 2 -name seqinfo.ini 2>/dev/null | wc -l)" -lt 14 ]; then
-  if [ -z "${FME_BIN:-}" ]; then
-    (cd "$ROOT" && cargo build --release --locked --bin fme)
-    FME_BIN="$ROOT/target/release/fme"
-  fi
-  # shellcheck source=render.sh
-  source "$HERE/render.sh"
-  gen train 1000 "$SYNTH_SEQS"
-  gen val 9000 14
-fi
+# shellcheck source=render.sh
+source "$HERE/render.sh"
+real_recipe_renders "$SYNTH_SEQS"
 cd "$HERE"
 FME_NET=480x288 nice -n "$NICE" "$VENV/bin/python" train_depth_real.py --real "$REAL_DATA" --synth "$DATA" \
   --synth-seqs "$SYNTH_SEQS" --budget-s "$BUDGET_S" --threads "$THREADS" --out "$OUT" ${TRAIN_ARGS:-}

@@ -27,7 +27,7 @@ import data
 import det
 import evaluate
 import real
-from train import finish, quantize_and_time
+from train import finish, quantize_and_time, run_log
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 CONFS = (0.2, 0.25, 0.3, 0.35, 0.4, 0.5)
@@ -73,11 +73,7 @@ def main():
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     os.makedirs(args.out, exist_ok=True)
-    log_lines = []
-
-    def log(msg):
-        print(msg, flush=True)
-        log_lines.append(msg)
+    log, log_lines = run_log()
 
     t0 = time.time()
     finetune = args.finetune is not None

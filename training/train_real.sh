@@ -25,14 +25,9 @@ NICE=${NICE:-10}
 FRAMES=${FRAMES:-24}
 [ -d "$REAL_DATA" ] || { echo "train_real.sh: REAL_DATA=$REAL_DATA: no such folder" >&2; exit 2; }
 VENV="$VENV" bash "$ROOT/scripts/setup_training.sh"
-if [ -z "${FME_BIN:-}" ]; then
-  (cd "$ROOT" && cargo build --release --locked --bin fme)
-  FME_BIN="$ROOT/target/release/fme"
-fi
 # shellcheck source=render.sh
 source "$HERE/render.sh"
-gen train 1000 "$SYNTH_SEQS"
-gen val 9000 14
+real_recipe_renders "$SYNTH_SEQS"
 cd "$HERE"
 train() {
   FME_NET=480x288 nice -n "$NICE" "$VENV/bin/python" train_real.py --real "$REAL_DATA" --synth "$DATA" \

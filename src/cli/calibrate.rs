@@ -265,7 +265,7 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
 }
 
 /// Grabs the sixth frame (after exposure settles) from a V4L2 camera or a recorded sequence
-/// (a path outside /dev, as `fme run --source` decides), and writes it to `out`.
+/// (`SourceConfig::is_camera`, as for `fme run --source`), and writes it to `out`.
 fn grab(src: &Path, config: &super::ConfigArgs, out: &Path) -> anyhow::Result<image::RgbImage> {
     use crate::capture::{CaptureError, FrameSource, RecordedSource, V4l2Source};
     let (cfg, _) = config.load(&[super::set_text("source.path", &src.to_string_lossy())])?;
@@ -273,7 +273,7 @@ fn grab(src: &Path, config: &super::ConfigArgs, out: &Path) -> anyhow::Result<im
         e @ (CaptureError::NotFound { .. } | CaptureError::Open { .. }) => usage(format!("--source: {e}")),
         e => anyhow::Error::new(e).context("--source"),
     };
-    let mut source: Box<dyn FrameSource> = if src.starts_with("/dev") {
+    let mut source: Box<dyn FrameSource> = if cfg.source.is_camera() {
         let mut cam = V4l2Source::new(cfg.source.clone());
         cam.reopen().map_err(open_err)?;
         Box::new(cam)

@@ -77,7 +77,7 @@ pub fn effective_config(args: &RunArgs) -> anyhow::Result<(Config, String)> {
 /// in the status registers: cameras enumerate late after power-up); a missing recording is.
 pub fn open_source(cfg: &Config) -> anyhow::Result<Box<dyn FrameSource>> {
     let path = &cfg.source.path;
-    if path.starts_with("/dev") {
+    if cfg.source.is_camera() {
         let mut cam = V4l2Source::new(cfg.source.clone());
         if let Err(e) = cam.reopen() {
             tracing::error!("camera {}: {e}; retrying with backoff (status bit 1 clear, fault code 1)", path.display());

@@ -12,9 +12,9 @@ pub fn check(cfg: &Config) -> Result<(), (String, String)> {
     fn keyed(key: &'static str) -> impl Fn(String) -> (String, String) {
         move |m| (key.to_string(), m)
     }
-    let src = &cfg.source.path;
-    if !src.starts_with("/dev") {
-        crate::capture::RecordedSource::open(src, false, false).map_err(|e| keyed("source.path")(e.to_string()))?;
+    if !cfg.source.is_camera() {
+        crate::capture::RecordedSource::open(&cfg.source.path, false, false)
+            .map_err(|e| keyed("source.path")(e.to_string()))?;
     }
     let calib_key = if cfg.camera.calibration.as_os_str().is_empty() { "source.path" } else { "camera.calibration" };
     crate::pipeline::Calibration::for_config(cfg).map_err(keyed(calib_key))?;

@@ -92,6 +92,14 @@ pub struct SourceConfig {
     pub max_pixels: u64,
 }
 
+impl SourceConfig {
+    /// Whether `path` names a V4L2 camera (anything under `/dev`) rather than a recorded sequence:
+    /// the one rule every command uses to pick the frame source.
+    pub fn is_camera(&self) -> bool {
+        self.path.starts_with("/dev")
+    }
+}
+
 impl Default for SourceConfig {
     fn default() -> Self {
         Self {

@@ -32,7 +32,7 @@ impl Calibration {
             (configured.clone(), "camera.calibration")
         } else {
             let meta = cfg.source.path.join("meta.json");
-            if cfg.source.path.starts_with("/dev") || !meta.is_file() {
+            if cfg.source.is_camera() || !meta.is_file() {
                 return Ok(None);
             }
             (meta, "the recording's calibration")
