@@ -50,7 +50,7 @@ static-copy:
 # (eval_recorded runs the static binary itself). The binary is built by the parity test's
 # build: cargo unifies the dev-dependencies' features into a test build, so a separate `cargo build`
 # would compile most dependencies twice. Same sources, features and flags as `make static`.
-STATIC_TESTS := --lib --test backend_parity --test infer_onnx --test pipeline_e2e --test eval_recorded
+STATIC_TESTS := --workspace --lib --test backend_parity --test infer_onnx --test pipeline_e2e --test eval_recorded
 static-check: setup
 	$(STATIC_CARGO) test $(STATIC_FLAGS) $(STATIC_TESTS) --no-run
 	@$(MAKE) --no-print-directory static-copy
@@ -60,8 +60,8 @@ static-check: setup
 # Unit, integration and doc tests. Benchmarks are built by `make lint` (clippy --all-targets) but
 # only run by `make bench`: a benchmark measures speed, it is not a test.
 test: setup setup-training
-	$(CARGO) test --locked --lib --bins --tests
-	$(CARGO) test --locked --doc
+	$(CARGO) test --locked --workspace --lib --bins --tests
+	$(CARGO) test --locked --workspace --doc
 
 fmt:
 	$(CARGO) fmt --all
@@ -70,8 +70,8 @@ fmt:
 # minute more, the dependencies' checks are shared with the first.
 lint: setup
 	$(CARGO) fmt --all -- --check
-	$(CARGO) clippy --locked --all-targets -- -D warnings
-	$(CARGO) clippy --locked --no-default-features --features tract,embed-models --all-targets -- -D warnings
+	$(CARGO) clippy --locked --workspace --all-targets -- -D warnings
+	$(CARGO) clippy --locked --workspace --no-default-features --features tract,embed-models --all-targets -- -D warnings
 
 # The main job on the bundled recording and models: `fme run` (detector + tracker + depth + eq. 1-5) with a
 # Modbus TCP server on 127.0.0.1:5020 and a live one-line view, then `fme eval` of the same models against

@@ -15,7 +15,7 @@ use std::time::Instant;
 use backend_outputs::{ModelSet, frames};
 use fme::capture::Frame;
 use fme::infer::{Backend, DepthConfig, DepthNet, Detector, DetectorConfig, RgbFrame};
-use fme::pipeline::{Calibration, FishPipeline, Pipeline};
+use fme::pipeline::{FishPipeline, Pipeline};
 use fme::units::Seconds;
 
 fn env_count(name: &str, default: usize) -> usize {
@@ -61,8 +61,9 @@ fn open(backend: Backend, set: ModelSet) -> Nets {
 }
 
 fn pipeline_cpu_pct(backend: Backend, set: ModelSet, frames: &[Frame]) -> f64 {
-    let cal = Calibration::load(&std::path::Path::new(backend_outputs::SEQ).join("meta.json")).expect("calibration");
-    let mut p = FishPipeline::with_backend(&set.config(), Some(cal), backend).expect("pipeline");
+    let cal =
+        fme::calibration::load(&std::path::Path::new(backend_outputs::SEQ).join("meta.json")).expect("calibration");
+    let mut p = FishPipeline::with_backend(&set.config().pipeline(), Some(cal), backend).expect("pipeline");
     let c0 = process_cpu_s();
     for f in frames {
         p.process(f).expect("frame processed");

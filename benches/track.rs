@@ -5,7 +5,7 @@
 //!    `../shared/benchmarks/mot15` beside the repository; skipped when absent), parsing excluded, median of 5 runs.
 
 use fme::geometry::PixelBox;
-use fme::mot::io::{self, ReadOptions};
+use fme::sequence::mot_text::{self, ReadOptions};
 use fme::track::{Detection, Tracker, TrackerConfig};
 use fme::units::Seconds;
 use std::time::Instant;
@@ -60,12 +60,12 @@ fn main() {
             rd.filter_map(|e| e.ok()).map(|e| e.path().join("det.txt")).filter(|p| p.is_file()).collect();
         paths.sort();
         for p in paths {
-            match io::read_file(&p, ReadOptions { require_sorted: true }) {
+            match mot_text::read_file(&p, ReadOptions { require_sorted: true }) {
                 Ok(mut rows) => {
                     // Every frame 1..=last, empty ones included (as SORT's loop runs them).
                     let last = rows.iter().map(|r| r.frame).max().unwrap_or(0) as usize;
                     let mut dets: Vec<Vec<Detection>> = vec![Vec::new(); last];
-                    for (f, r) in io::group_by_frame(&mut rows) {
+                    for (f, r) in mot_text::group_by_frame(&mut rows) {
                         dets[f as usize - 1] = rows[r].iter().map(|d| Detection::new(d.bbox, d.score)).collect();
                     }
                     seqs.push(dets);

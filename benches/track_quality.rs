@@ -5,7 +5,7 @@
 
 use fme::mot::MotMetrics;
 use fme::track::TrackerConfig;
-use fme::track::tune::{DetNoise, evaluate, pooled, synth_detections, toy_swarm};
+use fme::tune::{DetNoise, evaluate, pooled, synth_detections, toy_swarm};
 
 fn run(cfg: TrackerConfig, fish: usize, noise: &DetNoise) -> MotMetrics {
     let ms: Vec<MotMetrics> = (1..=3u64)

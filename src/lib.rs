@@ -1,59 +1,23 @@
 //! # fme: fish motion estimation for an underwater camera box
 //!
-//! A pure, allocation-free core that turns timestamped frames into a swarm activity index, with I/O
-//! adapters at the edges. The stages follow the paper "Fish Motion Estimation Using ML-based Relative
-//! Depth Estimation and Multi-Object Tracking" (Fang et al.), one module per stage:
+//! The binary's library: the command line ([`cli`]) over three crates, re-exported here so the
+//! integration tests and benchmarks name every module as `fme::<module>`:
 //!
-//! | module | stage | paper |
-//! |---|---|---|
-//! | [`geometry`], [`units`] | pixel / camera / world frames, metres, seconds, m/s | sec. 3.1, Fig. 2 |
-//! | [`calib`] | camera pose (and intrinsics) from measured reference objects: `fme calibrate` | eq. 1-2 |
-//! | [`sequence`] | MOTChallenge sequences with fme's ground-truth extras | sec. 4.1 |
-//! | [`synth`] | synthetic underwater scenes with exact ground truth | sec. 4.1, 4.4 |
-//! | [`infer`] | ONNX detector and relative-depth networks, reduced-rate scheduling | sec. 4.2, 4.3 |
-//! | [`track`] | Kalman tracking-by-detection | sec. 4.2 |
-//! | [`metric`] | relative inverse depth to metres from reference objects | eq. 1-2 |
-//! | [`postprocess`] | box-fluctuation and depth-jump detectors with EWMA | eq. 3-4 |
-//! | [`motion`] | world positions, per-fish 3D speed, swarm mean (activity index) | sec. 3.3, eq. 5 |
-//! | [`familiarity`] | "detections look unlike fish": the detector out of its training range | - |
-//! | [`pipeline`] | the stages chained on frame time; what every command runs | eq. 1-5 |
-//! | [`eval`], [`mot`] | speed, depth and tracking metrics against ground truth | sec. 4.5 |
-//! | [`config`], [`status`] | the one configuration; health and fault codes shared by the edges | - |
-//! | [`capture`], [`output`], [`console`], [`service`] | the edge daemon | - |
-//! | [`history`] | a daily CSV row per output update, hourly summaries, day plots | - |
+//! - `fme-core`: the pure pipeline (units, geometry, infer, track, metric, postprocess, motion,
+//!   familiarity, pipeline);
+//! - `fme-edge`: the configuration file, capture, outputs, console, history, black box, daemon;
+//! - `fme-lab`: synthetic data, scoring, the calibration solver, the tracker's tuning.
 //!
-//! Shared low-level pieces with no stage of their own: [`assign`] (the optimal assignment solver of
-//! the tracker and the MOT metrics), [`detection`] (what the detector produces and the tracker
-//! consumes) and [`rng`] (the seeded generator of all synthetic data).
+//! The layers and their rules: docs/pipeline.md#layers.
 
 #![warn(missing_docs)]
 
-pub mod assign;
-pub mod backoff;
-pub mod calib;
-pub mod capture;
-pub mod civil;
+pub use fme_core::{
+    assign, choice, detection, familiarity, geometry, infer, metric, motion, pipeline, postprocess, track, units,
+};
+pub use fme_edge::{
+    backoff, calibration, capture, civil, config, console, draw, history, output, record, sequence, service, status,
+};
+pub use fme_lab::{calib, eval, mot, rng, synth, tune};
+
 pub mod cli;
-pub mod config;
-pub mod console;
-pub mod detection;
-pub mod draw;
-pub mod eval;
-pub mod familiarity;
-pub mod geometry;
-pub mod history;
-pub mod infer;
-pub mod metric;
-pub mod mot;
-pub mod motion;
-pub mod output;
-pub mod pipeline;
-pub mod postprocess;
-pub mod record;
-pub mod rng;
-pub mod sequence;
-pub mod service;
-pub mod status;
-pub mod synth;
-pub mod track;
-pub mod units;

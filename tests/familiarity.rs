@@ -116,7 +116,7 @@ impl Detections {
 fn run(seen: Seen) -> (Vec<(f64, bool)>, FishPipeline) {
     let cfg = Config::default();
     let sub = Detections { seen, state: 7 };
-    let mut p = FishPipeline::with_substitute(&cfg, None, Box::new(sub)).expect("pipeline");
+    let mut p = FishPipeline::with_substitute(&cfg.pipeline(), None, Box::new(sub)).expect("pipeline");
     let mut out = Vec::new();
     for seq in 0..300u64 {
         let t = seq as f64 / 30.0;

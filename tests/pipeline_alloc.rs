@@ -6,7 +6,6 @@
 
 use fme::capture::{Frame, FrameSource, RecordedSource};
 use fme::config::Config;
-use fme::pipeline::Calibration;
 use fme::pipeline::FishPipeline;
 use fme::pipeline::Pipeline;
 use fme::units::Seconds;
@@ -20,8 +19,8 @@ fn prediction_frames_allocate_nothing_and_inference_frames_a_bounded_amount() {
     let seq = Path::new("tests/data/swarm20");
     let mut cfg = Config::default();
     cfg.source.path = seq.into();
-    let cal = Calibration::load(&seq.join("meta.json")).expect("calibration");
-    let mut p = FishPipeline::new(&cfg, Some(cal)).expect("pipeline");
+    let cal = fme::calibration::load(&seq.join("meta.json")).expect("calibration");
+    let mut p = FishPipeline::new(&cfg.pipeline(), Some(cal)).expect("pipeline");
     let mut src = RecordedSource::open(seq, false, false).expect("open");
     let mut frames: Vec<Frame> = Vec::new();
     while let Ok(f) = src.next_frame(Vec::new()) {

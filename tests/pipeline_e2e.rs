@@ -4,7 +4,6 @@
 
 use fme::capture::{Frame, FrameSource, PixelFormat, RecordedSource};
 use fme::config::Config;
-use fme::pipeline::Calibration;
 use fme::pipeline::FishPipeline;
 use fme::pipeline::{ActivitySample, Pipeline, PipelineError};
 use fme::sequence::Sequence;
@@ -48,8 +47,8 @@ fn true_mean(from: u32, to: u32) -> f64 {
 
 #[test]
 fn bundled_models_on_the_bundled_recording_give_calibrated_plausible_activity() {
-    let cal = Calibration::load(&Path::new(SEQ).join("meta.json")).expect("calibration");
-    let mut p = FishPipeline::new(&config(), Some(cal)).expect("pipeline with the bundled models");
+    let cal = fme::calibration::load(&Path::new(SEQ).join("meta.json")).expect("calibration");
+    let mut p = FishPipeline::new(&config().pipeline(), Some(cal)).expect("pipeline with the bundled models");
     let frames = frames();
     let samples = run(&mut p, &frames);
     let h = p.health();
@@ -81,7 +80,7 @@ fn without_calibration_fish_are_counted_but_no_speed_is_claimed() {
     // the next test.
     let mut cfg = config();
     cfg.depth.scale = fme::metric::DepthScale::References;
-    let mut p = FishPipeline::new(&cfg, None).expect("pipeline");
+    let mut p = FishPipeline::new(&cfg.pipeline(), None).expect("pipeline");
     let samples = run(&mut p, &frames()[..60]);
     let last = samples.last().expect("samples");
     assert!(last.flags.depth_uncalibrated && !p.calib().calibrated);
@@ -93,7 +92,7 @@ fn without_calibration_fish_are_counted_but_no_speed_is_claimed() {
 fn without_calibration_the_fish_are_the_ruler() {
     // The shipped `depth.scale = "auto"` with no calibration file: the board default camera, and the
     // fish of `motion.body_length_m` as the ruler once they have been seen in 10 depth frames (2 s).
-    let mut p = FishPipeline::new(&config(), None).expect("pipeline");
+    let mut p = FishPipeline::new(&config().pipeline(), None).expect("pipeline");
     let samples = run(&mut p, &frames());
     let c = p.calib();
     assert!(c.calibrated && c.source == fme::pipeline::ScaleSource::Fish && c.fish_rulers >= 3, "{c:?}");
@@ -107,7 +106,7 @@ fn without_calibration_the_fish_are_the_ruler() {
 
 #[test]
 fn a_bad_frame_is_an_error_and_the_next_one_is_fine() {
-    let mut p = FishPipeline::new(&config(), None).expect("pipeline");
+    let mut p = FishPipeline::new(&config().pipeline(), None).expect("pipeline");
     let frames = frames();
     p.process(&frames[0]).expect("first frame");
     let mut bad = frames[3].clone();
@@ -123,7 +122,7 @@ fn a_bad_frame_is_an_error_and_the_next_one_is_fine() {
 
 #[test]
 fn time_going_backwards_restarts_tracking_without_error() {
-    let mut p = FishPipeline::new(&config(), None).expect("pipeline");
+    let mut p = FishPipeline::new(&config().pipeline(), None).expect("pipeline");
     let frames = frames();
     let before = run(&mut p, &frames[..30]);
     assert!(p.health().tracks > 0 && p.tracks().count() > 0);
@@ -145,11 +144,11 @@ fn time_going_backwards_restarts_tracking_without_error() {
 fn missing_model_and_bad_calibration_are_named_at_start() {
     let mut c = config();
     c.detector.model = "/nonexistent/fish.onnx".into();
-    let e = FishPipeline::new(&c, None).unwrap_err();
+    let e = FishPipeline::new(&c.pipeline(), None).unwrap_err();
     assert!(e.contains("detector.model") && e.contains("/nonexistent/fish.onnx"), "{e}");
     let mut c = config();
     c.depth.model = "tests/data/swarm20/meta.json".into();
-    let e = FishPipeline::new(&c, None).unwrap_err();
+    let e = FishPipeline::new(&c.pipeline(), None).unwrap_err();
     assert!(e.contains("depth.model") && e.contains("meta.json"), "{e}");
     let mut c = config();
     c.camera.calibration = "/nonexistent/calibration.json".into();

@@ -3,7 +3,7 @@
 
 use fme::cli::tune::load_sequence;
 use fme::track::TrackerConfig;
-use fme::track::tune::{DetNoise, evaluate, synth_detections};
+use fme::tune::{DetNoise, evaluate, synth_detections};
 use std::path::Path;
 
 #[test]

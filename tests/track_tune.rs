@@ -2,7 +2,7 @@
 
 use fme::cli::tune::{TuneArgs, TuneMetric, run};
 use fme::track::TrackerConfig;
-use fme::track::tune::{DetNoise, evaluate, synth_detections, toy_swarm};
+use fme::tune::{DetNoise, evaluate, synth_detections, toy_swarm};
 use std::fmt::Write as _;
 
 #[test]

@@ -5,7 +5,6 @@
 use super::{UsageError, write_stdout};
 use crate::calib::{self, Options, Reference, Residual};
 use crate::geometry::{Camera, Intrinsics, Pixel, WorldPoint};
-use crate::pipeline::Calibration;
 use crate::sequence::{CameraMeta, ReferenceObject};
 use anyhow::Context;
 use std::fmt::Write as _;
@@ -234,7 +233,7 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     // The path is what the user gave: a missing folder or no permission is a usage error (exit 2).
     std::fs::write(out, text).map_err(|e| usage(format!("--out {}: {e}", out.display())))?;
     // Read back through the loader the daemon uses, so a file that it would reject is caught here.
-    Calibration::load(out).map_err(|e| anyhow::anyhow!("the written calibration does not load: {e}"))?;
+    crate::calibration::load(out).map_err(|e| anyhow::anyhow!("the written calibration does not load: {e}"))?;
     if let Some(p) = &args.overlay {
         overlay(frame, &cam, &refs, &sol.residuals, p)?;
     }
@@ -323,7 +322,7 @@ fn check(
     frame: &image::RgbImage,
     overlay_path: Option<&Path>,
 ) -> anyhow::Result<()> {
-    let stored = Calibration::load(calib_path).map_err(|e| usage(format!("--check {e}")))?;
+    let stored = crate::calibration::load(calib_path).map_err(|e| usage(format!("--check {e}")))?;
     if refs.is_empty() {
         return Err(usage("--points: no references"));
     }

@@ -1,5 +1,6 @@
 //! `fme eval`: run the daemon's pipeline on a recorded sequence and score it against ground truth.
 
+use super::choice::{self, name};
 use super::{ConfigArgs, UsageError, set_text, set_value};
 use crate::eval::{
     BoxesChoice, DepthChoice, EvalError, EvalOptions, EvalReport, evaluate, plot, write_series, write_tracks,
@@ -47,10 +48,10 @@ pub struct EvalArgs {
     #[arg(long)]
     pub box_fluctuation: bool,
     /// Metric fit (`--set depth.fit=...`).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = choice::parser::<FitMethod>())]
     pub fit: Option<FitMethod>,
     /// How a fish's depth is read (`--set depth.sample=...`).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = choice::parser::<DepthSample>())]
     pub depth_sample: Option<DepthSample>,
     /// Speed span, s (`--set motion.speed_span_s=...`).
     #[arg(long)]
@@ -59,10 +60,10 @@ pub struct EvalArgs {
     #[arg(long)]
     pub min_age: Option<f64>,
     /// Where the speed along the line of sight comes from (`--set motion.along_ray=...`).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = choice::parser::<AlongRay>())]
     pub along_ray: Option<AlongRay>,
     /// Chord or regression over the span (`--set motion.speed_method=...`).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = choice::parser::<SpeedMethod>())]
     pub speed_method: Option<SpeedMethod>,
     /// The detector (`--set detector.model=...`).
     #[arg(long)]
@@ -74,7 +75,7 @@ pub struct EvalArgs {
     #[arg(long)]
     pub threads: Option<usize>,
     /// Tracker preset (`--set tracker.preset=...`), as `fme track --preset`.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = choice::parser::<crate::track::TrackerPreset>())]
     pub preset: Option<crate::track::TrackerPreset>,
     /// Print one JSON object instead of the table.
     #[arg(long)]
@@ -168,11 +169,6 @@ impl EvalArgs {
         }
         s
     }
-}
-
-/// The config name of a value enum (`robust`, `relative-gt`, ...): the name clap accepts.
-fn name<T: clap::ValueEnum>(v: &T) -> String {
-    v.to_possible_value().map(|p| p.get_name().to_string()).unwrap_or_default()
 }
 
 /// The human-readable report, one line per measure.

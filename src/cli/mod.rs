@@ -2,6 +2,7 @@
 //! its `run` function; `src/main.rs` only parses and dispatches.
 
 pub mod calibrate;
+pub mod choice;
 pub mod config;
 pub mod eval;
 pub mod report;

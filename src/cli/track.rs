@@ -1,8 +1,8 @@
 //! `fme track`: Run the tracker on MOTChallenge detections.
 
 use crate::cli::{ConfigArgs, UsageError, set_text};
-use crate::mot::io::{self, MotRow, ReadOptions};
 use crate::mot::{MotAccumulator, MotMetrics};
+use crate::sequence::mot_text::{self, MotRow, ReadOptions};
 use crate::track::{Detection, Tracker, TrackerConfig, TrackerPreset};
 use crate::units::Seconds;
 use anyhow::Context;
@@ -23,7 +23,7 @@ pub struct TrackArgs {
     #[command(flatten)]
     pub config: ConfigArgs,
     /// Tracker preset (`--set tracker.preset=...`): `sort` (exact SORT) or `default`.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::choice::parser::<TrackerPreset>())]
     pub preset: Option<TrackerPreset>,
     /// Frame rate of the detections, frames per second (frame times are `(frame - 1) / fps`).
     #[arg(long, default_value_t = 30.0)]
@@ -53,7 +53,7 @@ pub fn track_rows(cfg: TrackerConfig, dets: &mut [MotRow], fps: f64) -> anyhow::
     let mut tracker = Tracker::new(cfg);
     let mut out = Vec::new();
     let mut frame_dets: Vec<Detection> = Vec::with_capacity(crate::track::MAX_DETS);
-    let groups = io::group_by_frame(dets);
+    let groups = mot_text::group_by_frame(dets);
     let mut next = 0usize;
     let last = groups.last().map_or(0, |g| g.0);
     let mut frame = 1u32;
@@ -128,17 +128,17 @@ pub fn run(args: TrackArgs) -> anyhow::Result<()> {
         return Err(UsageError(format!("--fps {} must be a positive number", args.fps)).into());
     }
     let result = if let Some(hyp) = &args.hyp {
-        io::read_file(hyp, ReadOptions::default()).map_err(input)?
+        mot_text::read_file(hyp, ReadOptions::default()).map_err(input)?
     } else {
         let det = args.det.as_deref().ok_or_else(|| UsageError("--det is required".into()))?;
         let cfg = tracker_config(&args.config, args.preset)?;
-        let mut dets = io::read_file(det, ReadOptions { require_sorted: true }).map_err(input)?;
+        let mut dets = mot_text::read_file(det, ReadOptions { require_sorted: true }).map_err(input)?;
         let rows = track_rows(cfg, &mut dets, args.fps).map_err(|e| UsageError(format!("{}: {e:#}", det.display())))?;
         if let Some(out) = &args.out {
             let f = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
             let mut w = std::io::BufWriter::new(f);
             for r in &rows {
-                io::write_row(&mut w, r, io::RowLayout::Result)
+                mot_text::write_row(&mut w, r, mot_text::RowLayout::Result)
                     .with_context(|| format!("writing {}", out.display()))?;
             }
             w.flush().with_context(|| format!("writing {}", out.display()))?;
@@ -146,14 +146,14 @@ pub fn run(args: TrackArgs) -> anyhow::Result<()> {
             // Neither a file nor a score asked for: the tracks go to stdout.
             let mut text = Vec::new();
             for r in &rows {
-                io::write_row(&mut text, r, io::RowLayout::Result)?;
+                mot_text::write_row(&mut text, r, mot_text::RowLayout::Result)?;
             }
             super::write_stdout(&String::from_utf8_lossy(&text))?;
         }
         rows
     };
     if let Some(gt) = &args.gt {
-        let gt = io::read_file(gt, ReadOptions::default()).map_err(input)?;
+        let gt = mot_text::read_file(gt, ReadOptions::default()).map_err(input)?;
         let m = score(&gt, &result);
         let text = if args.json {
             format!("{}\n", serde_json::to_string(&m)?)

@@ -6,7 +6,7 @@ use crate::cli::track::{METRICS_HEADER, metrics_line, tracker_config};
 use crate::mot::MotMetrics;
 use crate::sequence::{Meta, SeqInfo, read_gt, read_world};
 use crate::track::TrackerConfig;
-use crate::track::tune::{DetNoise, Grid, GtObs, TuneSequence, evaluate_with, pooled, synth_detections};
+use crate::tune::{DetNoise, Grid, GtObs, TuneSequence, evaluate_with, pooled, synth_detections};
 use anyhow::Context;
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -40,7 +40,7 @@ pub struct TuneArgs {
     #[command(flatten)]
     pub config: ConfigArgs,
     /// Tracker preset the grid varies (`--set tracker.preset=...`).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::choice::parser::<crate::track::TrackerPreset>())]
     pub preset: Option<crate::track::TrackerPreset>,
     /// Seed of the synthetic detector noise.
     #[arg(long, default_value_t = 1)]
@@ -109,7 +109,7 @@ pub fn load_sequence(dir: &Path, min_visibility: f64) -> anyhow::Result<TuneSequ
 }
 
 /// Reads `det/det.txt`-style detections (one implementation for `fme tune` and `fme eval`).
-pub use crate::mot::io::read_detections;
+pub use crate::sequence::mot_text::read_detections;
 
 fn key(m: &MotMetrics, metric: TuneMetric) -> (f64, f64) {
     match metric {
@@ -215,7 +215,7 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
         let s: Vec<String> = set.iter().map(|(k, v)| format!("{k}={v}")).collect();
         let mut cfg = base;
         for (k, v) in set {
-            crate::track::tune::set_key(&mut cfg, k, *v).map_err(UsageError)?;
+            crate::tune::set_key(&mut cfg, k, *v).map_err(UsageError)?;
         }
         writeln!(rep, "{:<8} {}  {}", r + 1, metrics_line(&score(cfg)), s.join(" "))?;
     }

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use fme::capture::{Frame, FrameSource, RecordedSource};
 use fme::config::Config;
 use fme::infer::{Backend, DepthConfig, DepthNet, Detector, DetectorConfig, RgbFrame};
-use fme::pipeline::{Calibration, FishPipeline, Pipeline};
+use fme::pipeline::{FishPipeline, Pipeline};
 use fme::units::Seconds;
 use serde::{Deserialize, Serialize};
 
@@ -141,8 +141,8 @@ pub fn compute(backend: Backend, set: ModelSet, frames: &[Frame]) -> Outputs {
 
 /// The activity series of the daemon's pipeline with `backend` on `set`.
 pub fn activity(backend: Backend, set: ModelSet, frames: &[Frame]) -> Vec<Option<f64>> {
-    let cal = Calibration::load(&Path::new(SEQ).join("meta.json")).expect("calibration");
-    let mut p = FishPipeline::with_backend(&set.config(), Some(cal), backend).expect("pipeline");
+    let cal = fme::calibration::load(&Path::new(SEQ).join("meta.json")).expect("calibration");
+    let mut p = FishPipeline::with_backend(&set.config().pipeline(), Some(cal), backend).expect("pipeline");
     frames.iter().map(|f| p.process(f).expect("frame processed").map(|s| s.mean.0).filter(|m| m.is_finite())).collect()
 }
 

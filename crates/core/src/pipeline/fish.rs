@@ -1,0 +1,682 @@
+//! The fish pipeline: detector + tracker + depth network + metric fit + post-processing + motion
+//! (paper eq. 1-5), on one thread, with all per-frame state owned here and reused.
+//!
+//! Per frame at time `t` (the frame's own timestamp, never an assumed period):
+//! 1. `tracker.predict(t)`: every frame, so tracks move between detector runs;
+//! 2. the schedule says whether this frame gets the detector (`detector.rate_hz`) and/or the depth
+//!    network (`depth.rate_hz`); only then is the frame decoded to RGB;
+//! 3. detections -> `tracker.update(t)`; depth map -> relative values at the reference objects'
+//!    pixels -> metric fit (eq. 1-2), kept until the next depth run;
+//! 4. the confirmed tracks' boxes -> [`ActivityEstimator`] (eq. 3-4 corrections, world positions from
+//!    the corrected centre and the metric depth sampled there, per-fish speed, swarm mean eq. 5).
+//!
+//! A [`Substitute`] may replace the detector, detector + tracker, or the depth network with ground
+//! truth (`fme eval`); everything else, schedule included, runs as in `fme run`.
+
+use super::PipelineConfig;
+use super::rate::RateMeter;
+use super::substitute::{DepthView, Substitute};
+use super::{
+    ActivitySample, CalibInfo, Calibration, Frame, FrameView, Pipeline, PipelineError, QualityFlags, ScaleSource,
+    StageHealth, TrackRecord,
+};
+use crate::familiarity::FamiliarityMonitor;
+use crate::geometry::{Camera, PixelBox};
+use crate::infer::{self, DepthNet, Detector, FramePlan, InferSchedule, RgbFrame};
+use crate::metric::{
+    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, DepthFit, DepthScale, FitSmoother, LengthLearner, MapKind, ROBUST_INLIER,
+    ReferenceFootprints, ReferencePoints, References, Rulers, fit_rulers, sample_fish,
+};
+use crate::motion::heading::apparent_length;
+use crate::motion::{ActivityEstimator, SwarmEstimate, TrackObservation, TrackView};
+use crate::track::{self, Tracker};
+use crate::units::{Metres, MetresPerSecond};
+
+/// Counts of the metric fits (eq. 1-2) since the start, for scoring and the console.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FitStats {
+    /// Successful fits.
+    pub fits: u64,
+    /// Failed fits (the previous one was kept).
+    pub failures: u64,
+    /// Sum of the successful scale/shift fits' RMS residuals at the references, m.
+    pub residual_sum_m: f64,
+    /// Scale/shift fits with a residual (the regressors have none).
+    pub residuals: u64,
+    /// References rejected as outliers by the robust fit, summed over fits.
+    pub rejected: u64,
+}
+
+/// Detector + tracker + depth + metric fit + post-processing + motion.
+pub struct FishPipeline {
+    cfg: PipelineConfig,
+    schedule: InferSchedule,
+    detector: Option<Detector>,
+    depth: Option<DepthNet>,
+    substitute: Option<Box<dyn Substitute>>,
+    tracker: Tracker,
+    /// "Detections look unlike fish" (`[familiarity]`).
+    familiarity: FamiliarityMonitor,
+    estimator: ActivityEstimator,
+    refs: ReferencePoints,
+    footprints: ReferenceFootprints,
+    fit: Option<DepthFit>,
+    fit_stats: FitStats,
+    /// The fish fit's running scale and shift (`depth.scale`).
+    fish_fit: FitSmoother,
+    /// The fish's looks for the fish fit.
+    rulers: Rulers,
+    /// The cohort length measured under the references' fit (`depth.learn_fish_length`).
+    learned_length: LengthLearner,
+    /// The estimator's tracks, copied for the fish fit (allocated once).
+    views: Vec<TrackView>,
+    calib: CalibInfo,
+    rgb: Vec<u8>,
+    dets: Vec<track::Detection>,
+    given: Vec<(u32, PixelBox)>,
+    obs: Vec<TrackObservation>,
+    ran: FramePlan,
+    estimate: SwarmEstimate,
+    last_t: Option<f64>,
+    health: StageHealth,
+    det_rate: RateMeter,
+    depth_rate: RateMeter,
+}
+
+impl std::fmt::Debug for FishPipeline {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FishPipeline")
+            .field("detector", &self.detector)
+            .field("depth", &self.depth)
+            .field("substitute", &self.substitute.is_some())
+            .field("references", &self.refs.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl FishPipeline {
+    /// The pipeline of `fme run`. `calibration`: the camera and reference objects (`None`:
+    /// uncalibrated: the fish are the ruler when `depth.scale` and a fish length allow it, else no
+    /// speed is reported). Errors name the config key and the
+    /// file (missing ONNX Runtime, missing or mismatched model).
+    pub fn new(cfg: &PipelineConfig, calibration: Option<Calibration>) -> Result<Self, String> {
+        Self::build(cfg, calibration, None, infer::Backend::DEFAULT)
+    }
+
+    /// As [`Self::new`], with the networks run by `backend` (a build with both backends: the
+    /// parity test and the backend benchmark).
+    pub fn with_backend(
+        cfg: &PipelineConfig,
+        calibration: Option<Calibration>,
+        backend: infer::Backend,
+    ) -> Result<Self, String> {
+        Self::build(cfg, calibration, None, backend)
+    }
+
+    /// The same pipeline with stages replaced by `substitute` (`fme eval`); networks it replaces
+    /// are not loaded.
+    pub fn with_substitute(
+        cfg: &PipelineConfig,
+        calibration: Option<Calibration>,
+        substitute: Box<dyn Substitute>,
+    ) -> Result<Self, String> {
+        Self::build(cfg, calibration, Some(substitute), infer::Backend::DEFAULT)
+    }
+
+    fn build(
+        cfg: &PipelineConfig,
+        calibration: Option<Calibration>,
+        sub: Option<Box<dyn Substitute>>,
+        backend: infer::Backend,
+    ) -> Result<Self, String> {
+        cfg.validate()?;
+        let needs_detector = !sub.as_ref().is_some_and(|s| s.replaces_tracks() || s.replaces_detector());
+        let needs_depth = !sub.as_ref().is_some_and(|s| s.replaces_depth());
+        if needs_detector || needs_depth {
+            backend.prepare().map_err(|e| format!("{}: {e}", backend.name()))?;
+        }
+        let detector = if needs_detector {
+            let c = infer::DetectorConfig {
+                model: infer::runtime::resolve_model(&cfg.detector.model),
+                ..cfg.detector.clone()
+            };
+            Some(Detector::open_with(&c, c.session(), backend).map_err(|e| format!("detector.model: {e}"))?)
+        } else {
+            None
+        };
+        let depth = if needs_depth {
+            let c = infer::DepthConfig { model: infer::runtime::resolve_model(&cfg.depth.model), ..cfg.depth.clone() };
+            Some(DepthNet::open_with(&c, c.session(), backend).map_err(|e| format!("depth.model: {e}"))?)
+        } else {
+            None
+        };
+        let camera = calibration.as_ref().map_or_else(|| fallback_camera(cfg), |c| c.camera);
+        // References are kept if they fall inside the calibrated image (principal point at its centre);
+        // sampling outside the actual frame returns nothing anyway.
+        let (w, h) = ((2.0 * camera.intrinsics.cx).ceil() as u32, (2.0 * camera.intrinsics.cy).ceil() as u32);
+        let refs = calibration
+            .as_ref()
+            .map(|c| ReferencePoints::project(&camera, c.references.iter().copied(), w, h))
+            .unwrap_or_default();
+        let footprints = match (&calibration, cfg.detector.ignore_references) {
+            (Some(c), true) => ReferenceFootprints::project(&camera, c.cubes.iter().copied()),
+            _ => ReferenceFootprints::default(),
+        };
+        Ok(Self {
+            schedule: InferSchedule::new(cfg.detector.rate_hz, cfg.depth.rate_hz),
+            detector,
+            depth,
+            substitute: sub,
+            tracker: Tracker::new(cfg.tracker),
+            familiarity: FamiliarityMonitor::new(cfg.familiarity),
+            estimator: ActivityEstimator::new(camera, cfg.motion, cfg.postprocess),
+            calib: CalibInfo { references_visible: refs.len() as u32, ..CalibInfo::default() },
+            refs,
+            footprints,
+            fit: None,
+            fit_stats: FitStats::default(),
+            fish_fit: FitSmoother::default(),
+            rulers: Rulers::new(crate::motion::MAX_FISH),
+            learned_length: LengthLearner::new(crate::motion::MAX_FISH),
+            views: Vec::with_capacity(crate::motion::MAX_FISH),
+            rgb: Vec::with_capacity(cfg.frame_width as usize * cfg.frame_height as usize * 3),
+            dets: Vec::with_capacity(track::MAX_DETS),
+            given: Vec::with_capacity(track::MAX_TRACKS),
+            obs: Vec::with_capacity(track::MAX_TRACKS),
+            ran: FramePlan::default(),
+            estimate: SwarmEstimate::default(),
+            last_t: None,
+            health: StageHealth::default(),
+            det_rate: RateMeter::default(),
+            depth_rate: RateMeter::default(),
+            cfg: cfg.clone(),
+        })
+    }
+
+    /// What ran on the last frame (detector, depth).
+    pub fn ran(&self) -> FramePlan {
+        self.ran
+    }
+
+    /// The detections of the last detector run (after dropping those on the reference cubes).
+    pub fn detections(&self) -> &[track::Detection] {
+        &self.dets
+    }
+
+    /// The tracked boxes that entered the estimator on the last frame.
+    pub fn observations(&self) -> &[TrackObservation] {
+        &self.obs
+    }
+
+    /// The depth network's last relative inverse-depth map (none when the network does not run:
+    /// ground-truth depth, or before its first frame).
+    pub fn depth_map(&self) -> Option<&infer::RelDepthMap> {
+        self.depth.as_ref().and_then(DepthNet::last_map)
+    }
+
+    /// The estimator's result on the last frame (corrections, latency, ...).
+    pub fn estimate(&self) -> &SwarmEstimate {
+        &self.estimate
+    }
+
+    /// The estimator's tracks after the last frame.
+    pub fn tracks(&self) -> impl Iterator<Item = TrackView> + '_ {
+        self.estimator.tracks()
+    }
+
+    /// Counts of the metric fits so far.
+    pub fn fit_stats(&self) -> FitStats {
+        self.fit_stats
+    }
+
+    /// The reference objects inside the image.
+    pub fn references_in_view(&self) -> usize {
+        self.refs.len()
+    }
+
+    /// Takes the first `n` reference objects out of the fit from now on, as if fouled over or out of
+    /// sight (`fme eval --hide-refs`; the tests of `depth.scale = "auto"`).
+    pub fn hide_references(&mut self, n: usize) {
+        self.refs.drop_first(n);
+    }
+
+    /// Makes the recorded positions of the first `n` reference objects wrong from now on (moved with
+    /// the net, or fouled: `fme eval --move-refs`): each one's depth off by its own factor, 0.7-1.3.
+    pub fn misplace_references(&mut self, n: usize) {
+        self.refs.misplace_first(n);
+    }
+
+    /// The depth map the pipeline samples now: the network's last map, or the substitute's.
+    fn depth_view(&self) -> Option<&dyn DepthView> {
+        depth_view(&self.depth, &self.substitute)
+    }
+
+    /// Starts over after time went backwards (camera restarted): tracks, speeds and schedules are
+    /// reset; the metric fit is kept (the camera has not moved).
+    fn restart(&mut self) {
+        self.tracker = Tracker::new(self.cfg.tracker);
+        self.estimator = ActivityEstimator::new(*self.estimator.camera(), self.cfg.motion, self.cfg.postprocess);
+        self.schedule = InferSchedule::new(self.cfg.detector.rate_hz, self.cfg.depth.rate_hz);
+        self.rulers.clear();
+        self.learned_length.reset();
+        self.familiarity.reset();
+    }
+
+    /// Refits on the current depth map (eq. 1-2) as `depth.scale` says: on the references, or on the
+    /// fish as rulers (with the visible references' pairs added), or the references while at least
+    /// [`AUTO_MIN_REFERENCES`] are visible and fit within [`AUTO_MAX_RESIDUAL_M`], else the fish. A
+    /// failed fit keeps the previous one. Metric maps (ground-truth depth) need no fit.
+    fn refit(&mut self, t_s: f64) {
+        let Some(view) = self.depth_view() else { return };
+        if view.kind() == MapKind::Depth {
+            return;
+        }
+        let scale = self.cfg.depth.scale;
+        let ruler = self.cfg.motion.body_length();
+        let refs = if self.refs.is_empty() { References::new() } else { self.refs.pairs(|px| view.point(px)) };
+        let by_refs = match scale {
+            DepthScale::References => !self.refs.is_empty(),
+            DepthScale::Auto => refs.len() >= AUTO_MIN_REFERENCES || ruler.is_none(),
+            DepthScale::Fish => false,
+        };
+        if by_refs && !self.refs.is_empty() {
+            self.calib.references_visible = refs.len() as u32;
+            match self.cfg.depth.fit.fit(&refs, ROBUST_INLIER) {
+                Ok(f) => {
+                    let residual = f.scale_shift().map_or(f64::NAN, |ss| ss.residual_rms.0);
+                    // `auto` leaves references that fit badly (fouled, moved) to the fish.
+                    if scale != DepthScale::Auto || ruler.is_none() || residual <= AUTO_MAX_RESIDUAL_M {
+                        self.fish_fit.reset();
+                        self.accept_reference_fit(f, refs.len());
+                        // `auto` keeps looking at the fish, so they are rulers at once when the
+                        // references go.
+                        if let (DepthScale::Auto, Some(length)) = (scale, ruler) {
+                            self.fish_refit(t_s, length, refs, false);
+                        }
+                        return;
+                    }
+                }
+                Err(e) => {
+                    if scale != DepthScale::Auto || ruler.is_none() {
+                        self.fit_stats.failures += 1;
+                        tracing::debug!("metric fit failed ({e}); keeping the previous fit");
+                        return;
+                    }
+                }
+            }
+        }
+        let Some(length) = ruler else { return };
+        if scale == DepthScale::References {
+            return;
+        }
+        self.fish_refit(t_s, length, refs, true);
+    }
+
+    /// Keeps a fit on the references.
+    fn accept_reference_fit(&mut self, f: DepthFit, visible: usize) {
+        self.fit_stats.fits += 1;
+        let (scale, shift, residual) = match f.scale_shift() {
+            Some(ss) => {
+                self.fit_stats.residual_sum_m += ss.residual_rms.0;
+                self.fit_stats.residuals += 1;
+                self.fit_stats.rejected += u64::from(ss.rejected.count_ones());
+                (ss.s, ss.t, ss.residual_rms.0)
+            }
+            None => (f64::NAN, f64::NAN, f64::NAN),
+        };
+        self.fit = Some(f);
+        self.calib = CalibInfo {
+            scale,
+            shift,
+            residual_m: residual,
+            references_visible: visible as u32,
+            calibrated: true,
+            source: ScaleSource::References,
+            fish_rulers: 0,
+            ruler_length_m: self.learned_length.length().map_or(0.0, |l| l.0),
+            ruler_length_learned: self.learned_length.length().is_some(),
+        };
+    }
+
+    /// The fish fit (docs/pipeline.md, "The fish as the ruler"): each confirmed fish seen in enough
+    /// depth frames is a reference at its depth scaled by the cohort's length over its broadside
+    /// length ([`Rulers`]); `refs` (the visible references' pairs) are added. The cohort's length is
+    /// `length`, or the one measured under the references' fit while they set the scale
+    /// (`depth.learn_fish_length`, [`LengthLearner`]). With `fit` false (the references set the scale),
+    /// the fish's looks are recorded and their length measured.
+    fn fish_refit(&mut self, t_s: f64, length: crate::units::Metres, refs: References, fit: bool) {
+        self.views.clear();
+        self.views.extend(self.estimator.tracks());
+        // Field by field, so the estimator can be borrowed mutably beside it.
+        let view = depth_view(&self.depth, &self.substitute);
+        let Some(view) = view else { return };
+        let mut pairs = refs.clone();
+        let intrinsics = self.estimator.camera().intrinsics;
+        let (how, views) = (self.cfg.depth.sample, &self.views);
+        let learn = !fit && self.cfg.depth.learn_fish_length;
+        let learned = self.learned_length.length().filter(|_| self.cfg.depth.learn_fish_length);
+        let length = learned.unwrap_or(length);
+        let mut rulers = 0u32;
+        for v in views {
+            // Seen in the last frame.
+            if !self.last_t.is_some_and(|t| t - v.last_seen.0 <= 0.25) {
+                continue;
+            }
+            let centre = v.bbox.center();
+            let others = views.iter().filter(|x| x.id != v.id).map(|x| &x.bbox);
+            let Some(relative) =
+                sample_fish(how, view.kind(), &v.bbox, others, || view.point(centre), |p| view.grid(p))
+            else {
+                continue;
+            };
+            let angle = apparent_length(&intrinsics, &v.bbox, crate::units::Metres(1.0)).0;
+            self.rulers.look(t_s, v.id, &intrinsics, centre, angle, relative);
+            if learn && let Some(l) = self.fit.as_ref().and_then(|f| self.rulers.broadside(v.id, f)) {
+                self.learned_length.push(l);
+            }
+            if !fit || pairs.is_full() {
+                continue;
+            }
+            if let Some(p) = self.rulers.pair(v.id, self.fit.as_ref(), length) {
+                let _ = pairs.push(p);
+                rulers += 1;
+            }
+        }
+        if learn {
+            self.learned_length.commit(t_s);
+        }
+        if !fit {
+            return;
+        }
+        self.calib.references_visible = refs.len() as u32;
+        match fit_rulers(&pairs, self.cfg.motion.body_length_cv) {
+            Ok(f) => {
+                let f = self.fish_fit.update(t_s, f);
+                self.fit_stats.fits += 1;
+                self.fit_stats.residual_sum_m += f.residual_rms.0;
+                self.fit_stats.residuals += 1;
+                self.fit_stats.rejected += u64::from(f.rejected.count_ones());
+                self.fit = Some(DepthFit::ScaleShift(f));
+                self.calib = CalibInfo {
+                    scale: f.s,
+                    shift: f.t,
+                    residual_m: f.residual_rms.0,
+                    references_visible: refs.len() as u32,
+                    calibrated: true,
+                    source: ScaleSource::Fish,
+                    fish_rulers: rulers,
+                    ruler_length_m: length.0,
+                    ruler_length_learned: learned.is_some(),
+                };
+            }
+            Err(e) => {
+                self.fit_stats.failures += 1;
+                tracing::debug!("fish fit failed ({e}); keeping the previous fit");
+            }
+        }
+    }
+
+    /// Runs the detector, or takes the substitute's detections, and updates the tracker.
+    fn detect(&mut self, frame: &Frame, rgb: Option<&RgbFrame<'_>>) -> Result<(), PipelineError> {
+        let t = frame.timestamp;
+        self.dets.clear();
+        match (&mut self.detector, rgb) {
+            (Some(det), Some(rgb)) => match det.detect(rgb, t) {
+                Ok(d) => {
+                    let footprints = &self.footprints;
+                    self.dets.extend(
+                        d.items
+                            .iter()
+                            .filter(|x| !footprints.covers(&x.bbox))
+                            .map(|x| track::Detection::new(x.bbox, x.score)),
+                    );
+                }
+                Err(e) => {
+                    self.health.detector_ok = false;
+                    return Err(PipelineError::Stage { stage: "detector", message: e.to_string() });
+                }
+            },
+            _ => {
+                if let Some(s) = self.substitute.as_mut() {
+                    s.detections(frame, &mut self.dets)
+                        .map_err(|message| PipelineError::Stage { stage: "detections", message })?;
+                }
+            }
+        }
+        self.health.detector_ok = true;
+        self.det_rate.record(t.0);
+        self.health.detector_runs += 1;
+        let matched = self
+            .tracker
+            .update(t, &self.dets)
+            .map_err(|e| PipelineError::Stage { stage: "tracker", message: e.to_string() })?;
+        self.familiarity.observe(t.0, self.dets.iter().map(|d| (d.bbox, d.score)), matched.iter().map(|o| o.id));
+        self.health.familiarity = self.familiarity.state();
+        Ok(())
+    }
+
+    /// Runs the depth network, or loads the substitute's map, then refits.
+    fn depth_frame(&mut self, frame: &Frame, rgb: Option<&RgbFrame<'_>>) -> Result<(), PipelineError> {
+        match (&mut self.depth, rgb) {
+            (Some(net), Some(rgb)) => {
+                if let Err(e) = net.estimate(rgb, frame.timestamp) {
+                    self.health.depth_ok = false;
+                    return Err(PipelineError::Stage { stage: "depth", message: e.to_string() });
+                }
+            }
+            _ => {
+                if let Some(s) = self.substitute.as_mut() {
+                    s.load_depth(frame).map_err(|message| PipelineError::Stage { stage: "depth", message })?;
+                }
+            }
+        }
+        self.health.depth_ok = true;
+        self.depth_rate.record(frame.timestamp.0);
+        self.health.depth_runs += 1;
+        self.refit(frame.timestamp.0);
+        Ok(())
+    }
+}
+
+/// The depth map sampled now: the network's last map, or the substitute's.
+fn depth_view<'a>(net: &'a Option<DepthNet>, sub: &'a Option<Box<dyn Substitute>>) -> Option<&'a dyn DepthView> {
+    match (net, sub) {
+        (Some(net), _) => net.last_map().map(|m| m as &dyn DepthView),
+        (None, Some(s)) => s.depth(),
+        (None, None) => None,
+    }
+}
+
+/// A camera for an uncalibrated box (no speeds are reported without a fit, so only the image size
+/// matters): 90 degrees horizontal field of view, identity pose.
+fn fallback_camera(cfg: &PipelineConfig) -> Camera {
+    let (w, h) = (cfg.frame_width.max(1), cfg.frame_height.max(1));
+    let intrinsics = crate::geometry::Intrinsics::from_hfov(w, h, 90.0).unwrap_or(crate::geometry::Intrinsics {
+        fx: 1.0,
+        fy: 1.0,
+        cx: 0.0,
+        cy: 0.0,
+        distortion: [0.0; 5],
+    });
+    Camera { intrinsics, pose: crate::geometry::Pose::identity() }
+}
+
+impl Pipeline for FishPipeline {
+    fn process(&mut self, frame: &Frame) -> Result<Option<ActivitySample>, PipelineError> {
+        let t = frame.timestamp;
+        if !t.0.is_finite() {
+            return Err(PipelineError::Decode { seq: frame.seq, message: format!("timestamp {} is not finite", t.0) });
+        }
+        if self.last_t.is_some_and(|last| t.0 <= last) {
+            tracing::warn!(t = t.0, "frame time went backwards (camera restart?): tracks reset");
+            self.restart();
+        }
+        self.last_t = Some(t.0);
+        let plan = self.schedule.plan(t);
+        self.ran = plan;
+        let tracks_given = self.substitute.as_ref().is_some_and(|s| s.replaces_tracks());
+        if !tracks_given {
+            self.tracker.predict(t).map_err(|e| PipelineError::Stage { stage: "tracker", message: e.to_string() })?;
+        }
+        // Decode only when a network runs on this frame.
+        let net_runs = (plan.detect && self.detector.is_some()) || (plan.depth && self.depth.is_some());
+        let mut rgb_buf = std::mem::take(&mut self.rgb);
+        let result = (|| {
+            let rgb = if net_runs {
+                let (w, h) = frame
+                    .to_rgb_into(&mut rgb_buf)
+                    .map_err(|message| PipelineError::Decode { seq: frame.seq, message })?;
+                Some(
+                    RgbFrame::new(w, h, &rgb_buf)
+                        .map_err(|e| PipelineError::Decode { seq: frame.seq, message: e.to_string() })?,
+                )
+            } else {
+                None
+            };
+            if plan.detect && !tracks_given {
+                self.detect(frame, rgb.as_ref())?;
+            }
+            if plan.depth {
+                self.depth_frame(frame, rgb.as_ref())?;
+            }
+            Ok::<(), PipelineError>(())
+        })();
+        self.rgb = rgb_buf;
+        result?;
+        self.obs.clear();
+        if tracks_given {
+            if let Some(s) = self.substitute.as_mut() {
+                self.given.clear();
+                s.tracks(frame, &mut self.given)
+                    .map_err(|message| PipelineError::Stage { stage: "tracks", message })?;
+                self.obs.extend(self.given.iter().map(|&(id, bbox)| TrackObservation { id, bbox, depth: None }));
+            }
+        } else {
+            self.obs.extend(self.tracker.confirmed().map(|o| TrackObservation { id: o.id, bbox: o.bbox, depth: None }));
+        }
+        self.health.tracks = self.obs.len() as u32;
+        self.health.detector_hz = self.det_rate.hz();
+        self.health.depth_hz = self.depth_rate.hz();
+        // On the fish's scale with the configured length, every fish is as long as the ruler
+        // (`ActivityEstimator::set_ruler_length`). With a length measured under the references the
+        // fit carries their scale on, and the lengths measured under it with it.
+        let ruler = (self.calib.source == ScaleSource::Fish && !self.calib.ruler_length_learned)
+            .then_some(Metres(self.calib.ruler_length_m));
+        self.estimator.set_ruler_length(ruler);
+        // Field by field, so the estimator can be borrowed mutably beside it.
+        let view = depth_view(&self.depth, &self.substitute);
+        let (fit, how, obs) = (self.fit.as_ref(), self.cfg.depth.sample, &self.obs);
+        let s = self.estimator.update_with(t, obs, |o, px| {
+            let view = view?;
+            let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
+            let others = obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox);
+            let r = sample_fish(how, view.kind(), &b, others, || view.point(px), |p| view.grid(p))?;
+            match view.kind() {
+                MapKind::Depth => Some(Metres(r)),
+                MapKind::InverseDepth => fit?.depth(r),
+            }
+        });
+        self.estimate = s;
+        let metric = self.fit.is_some() || view.is_some_and(|v| v.kind() == MapKind::Depth);
+        let mean = s.mean.map_or(f64::NAN, |m| m.0);
+        let ci95_half = s.ci95.map_or(f64::NAN, |(lo, hi)| 0.5 * (hi.0 - lo.0));
+        let bls = match self.cfg.motion.body_length() {
+            Some(l) => mean / l.0,
+            None => s.mean_bls.unwrap_or(f64::NAN),
+        };
+        Ok(Some(ActivitySample {
+            timestamp: t,
+            mean: MetresPerSecond(mean),
+            mean_body_lengths: bls,
+            smoothed: MetresPerSecond(s.smoothed.map_or(f64::NAN, |m| m.0)),
+            ci95_half: MetresPerSecond(ci95_half),
+            fish: s.n_fish as u32,
+            latency: s.latency,
+            flags: QualityFlags {
+                too_few_fish: (s.n_fish as u32) < self.cfg.motion.min_fish,
+                depth_uncalibrated: !metric,
+                stale: false,
+                unlike_fish: self.familiarity.unlike_fish(),
+            },
+            scale: self.calib.source,
+        }))
+    }
+
+    fn health(&self) -> StageHealth {
+        self.health
+    }
+
+    fn calib(&self) -> CalibInfo {
+        self.calib
+    }
+
+    fn frame_view(&self, out: &mut FrameView, references: bool) {
+        out.clear();
+        out.detected = self.ran.detect;
+        if self.ran.detect {
+            out.detections.extend(self.dets.iter().map(|d| (d.bbox, d.score)));
+        }
+        let t = self.last_t.unwrap_or(f64::NAN);
+        out.tracks.extend(self.estimator.tracks().filter(|v| v.last_seen.0 == t).map(|v| TrackRecord {
+            id: v.id,
+            bbox: v.bbox,
+            depth_m: v.depth.map_or(f64::NAN, |d| d.0),
+            speed_mps: v.speed.map_or(f64::NAN, |s| s.0),
+        }));
+        if !references {
+            return;
+        }
+        // Each reference with the fit's residual there (eq. 1-2): which one was measured wrong or
+        // is fouled shows at a glance.
+        let (view, fit) = (self.depth_view(), self.fit.as_ref());
+        out.references.extend(self.refs.iter().map(|(px, depth)| {
+            let fitted = match view {
+                Some(v) if v.kind() == MapKind::Depth => v.point(px).map(Metres),
+                Some(v) => v.point(px).and_then(|r| fit?.depth(r)),
+                None => None,
+            };
+            (px, fitted.map_or(f64::NAN, |d| d.0 - depth.0))
+        }));
+    }
+
+    fn depth_grid(&self, size: (u32, u32), grid: (u32, u32), out: &mut Vec<f32>) -> bool {
+        let Some(view) = self.depth_view() else { return false };
+        let fit = self.fit.as_ref();
+        if view.kind() == MapKind::InverseDepth && fit.is_none() {
+            return false;
+        }
+        out.clear();
+        let (cw, ch) = (f64::from(size.0) / f64::from(grid.0.max(1)), f64::from(size.1) / f64::from(grid.1.max(1)));
+        for r in 0..grid.1 {
+            for c in 0..grid.0 {
+                let px = crate::geometry::Pixel { u: (f64::from(c) + 0.5) * cw, v: (f64::from(r) + 0.5) * ch };
+                let d = view.grid(px).and_then(|x| match view.kind() {
+                    MapKind::Depth => Some(x),
+                    MapKind::InverseDepth => fit.and_then(|f| f.depth(x)).map(|m| m.0),
+                });
+                out.push(d.map_or(f32::NAN, |d| d as f32));
+            }
+        }
+        true
+    }
+
+    fn describe_tracks(&self, out: &mut dyn std::fmt::Write, max: usize) -> std::fmt::Result {
+        for v in self.estimator.tracks().take(max) {
+            let c = v.bbox.center();
+            write!(
+                out,
+                "id {:>4} t {:.2} s box ({:.0},{:.0}) {:.0}x{:.0} px",
+                v.id, v.last_seen.0, c.u, c.v, v.bbox.w, v.bbox.h
+            )?;
+            match v.depth {
+                Some(d) => write!(out, " depth {:.2} m", d.0)?,
+                None => write!(out, " depth -")?,
+            }
+            match v.speed {
+                Some(s) => writeln!(out, " speed {:.3} m/s", s.0)?,
+                None => writeln!(out, " speed -")?,
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,225 @@
+//! The pipeline: frames in, activity samples out (paper eq. 1-5), one implementation for every
+//! command.
+//!
+//! [`FishPipeline`] is the chain `fme run` ships: detector and depth network at reduced rates on
+//! frame time, tracker, metric fit on the reference objects (eq. 1-2), post-processing (eq. 3-4) and
+//! motion (eq. 5). `fme eval` drives the same type over a recording, with ground truth swapped in
+//! for a stage where asked ([`Substitute`]) and scoring taps on its outputs, so what it scores is
+//! what the PLC receives. The daemon (capture, queues, outputs, console, watchdog) only knows the
+//! [`Pipeline`] trait.
+//!
+//! Errors from a stage are returned as [`PipelineError::Stage`] (the service counts and logs them and
+//! keeps going; a panic inside `process` is caught and counted the same way).
+
+mod calibration;
+mod config;
+mod fish;
+mod frame;
+mod rate;
+mod substitute;
+
+pub use calibration::Calibration;
+pub use config::PipelineConfig;
+
+pub use fish::{FishPipeline, FitStats};
+pub use frame::{Frame, PixelFormat};
+pub use substitute::{DepthView, Substitute};
+
+use crate::units::{MetresPerSecond, Seconds};
+
+/// Quality flags of an activity sample (mirrored in the status register bits 3, 4, 6 and 10).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct QualityFlags {
+    /// Fewer tracked fish than `motion.min_fish`.
+    pub too_few_fish: bool,
+    /// No metric depth fit yet (reference objects not seen): speeds are in uncalibrated units.
+    pub depth_uncalibrated: bool,
+    /// The value is older than `output.stale_after_s` (set by the service, not the pipeline).
+    pub stale: bool,
+    /// The detections look unlike fish (`[familiarity]`, status bit 10): the value is not to be
+    /// trusted, and the feeding rule does not act on it.
+    pub unlike_fish: bool,
+}
+
+/// One activity sample (paper eq. 5: mean over tracked fish of each fish's 3D speed at a frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ActivitySample {
+    /// Timestamp of the frame the sample belongs to (camera clock).
+    pub timestamp: Seconds,
+    /// Swarm mean speed (eq. 5), m/s.
+    pub mean: MetresPerSecond,
+    /// Swarm mean speed in body lengths per second.
+    pub mean_body_lengths: f64,
+    /// Smoothed activity (EWMA over `motion.smoothing_s`), m/s.
+    pub smoothed: MetresPerSecond,
+    /// Half-width of the 95% interval of the mean, m/s.
+    pub ci95_half: MetresPerSecond,
+    /// Number of fish in the mean.
+    pub fish: u32,
+    /// How far back the mean refers to (a speed over a span is the speed at its middle), s.
+    pub latency: Seconds,
+    /// Quality flags.
+    pub flags: QualityFlags,
+    /// What set the metric scale of this sample (status bit 8, the series' and history's `scale`).
+    pub scale: ScaleSource,
+}
+
+/// Health of the pipeline stages, published in the status register and the console.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StageHealth {
+    /// The detector ran successfully on its last scheduled frame.
+    pub detector_ok: bool,
+    /// The depth network ran successfully on its last scheduled frame.
+    pub depth_ok: bool,
+    /// Detector runs per second achieved.
+    pub detector_hz: f64,
+    /// Depth runs per second achieved.
+    pub depth_hz: f64,
+    /// Detector runs since start (the metrics' counter; `rate()` of it is `detector_hz`).
+    pub detector_runs: u64,
+    /// Depth network runs since start.
+    pub depth_runs: u64,
+    /// Tracks currently confirmed.
+    pub tracks: u32,
+    /// The familiarity monitor's state ("detections look unlike fish", `[familiarity]`).
+    pub familiarity: crate::familiarity::FamiliarityState,
+}
+
+/// Metric depth calibration state (paper eq. 1-2), shown by the console `calib` command.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CalibInfo {
+    /// Fitted scale s.
+    pub scale: f64,
+    /// Fitted shift t.
+    pub shift: f64,
+    /// RMS residual of the fit on the reference objects, m.
+    pub residual_m: f64,
+    /// Reference objects visible in the last depth frame.
+    pub references_visible: u32,
+    /// Whether a fit is available.
+    pub calibrated: bool,
+    /// What set the scale of the fit in use (`depth.scale`).
+    pub source: ScaleSource,
+    /// Fish used as rulers in the last fish fit.
+    pub fish_rulers: u32,
+    /// The cohort length the fish fit uses, m (0 before any fish fit).
+    pub ruler_length_m: f64,
+    /// That length was measured under the references' fit (`depth.learn_fish_length`), not configured.
+    pub ruler_length_learned: bool,
+}
+
+/// What set the metric scale of the fit in use (`depth.scale`; docs/pipeline.md).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum ScaleSource {
+    /// No fit yet.
+    #[default]
+    None,
+    /// The reference objects (paper eq. 1-2).
+    References,
+    /// The tracked fish of the configured mean length (with any visible references).
+    Fish,
+}
+
+impl ScaleSource {
+    /// Name shown on the console and in the series.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::References => "references",
+            Self::Fish => "fish",
+        }
+    }
+
+    /// The source named `name` (as [`Self::name`] writes it).
+    pub fn parse(name: &str) -> Option<Self> {
+        [Self::None, Self::References, Self::Fish].into_iter().find(|s| s.name() == name)
+    }
+}
+
+/// A pipeline: owns all per-frame state; called on the pipeline thread only.
+pub trait Pipeline: Send {
+    /// Processes one frame. Returns a sample when one is due (the pipeline decides its own detection
+    /// and depth schedule from frame timestamps; the service rate-limits what reaches the outputs).
+    /// An `Err` is a bad frame or a stage failure: the service logs it, raises a status bit and goes on.
+    fn process(&mut self, frame: &Frame) -> Result<Option<ActivitySample>, PipelineError>;
+    /// Current stage health.
+    fn health(&self) -> StageHealth;
+    /// Current calibration.
+    fn calib(&self) -> CalibInfo {
+        CalibInfo::default()
+    }
+    /// Writes one line per confirmed track (console `tracks`), at most `max` lines.
+    fn describe_tracks(&self, _out: &mut dyn std::fmt::Write, _max: usize) -> std::fmt::Result {
+        Ok(())
+    }
+    /// Fills `out` with what the last frame produced (the black box and snapshots,
+    /// docs/recording.md): detections and tracks; the references only with `references` (they cost
+    /// a depth reading each, so only snapshots ask for them). The default: nothing.
+    fn frame_view(&self, out: &mut FrameView, references: bool) {
+        let _ = references;
+        out.clear();
+    }
+    /// Metric depth (m, NaN where unknown) on a `cols` x `rows` grid of cell centres over a
+    /// `width` x `height` image, row-major into `out`; false when there is no metric depth yet.
+    fn depth_grid(&self, _size: (u32, u32), _grid: (u32, u32), _out: &mut Vec<f32>) -> bool {
+        false
+    }
+}
+
+/// One tracked fish on a frame, for the black box and snapshots.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackRecord {
+    /// Track id.
+    pub id: u32,
+    /// Corrected box, px.
+    pub bbox: crate::geometry::PixelBox,
+    /// Corrected depth, m (NaN when unknown).
+    pub depth_m: f64,
+    /// 3D speed, m/s (NaN when unknown).
+    pub speed_mps: f64,
+}
+
+/// What one frame produced: the detections (when the detector ran on it) and the tracked fish.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FrameView {
+    /// The detector ran on this frame.
+    pub detected: bool,
+    /// Its detections: box and score.
+    pub detections: Vec<(crate::geometry::PixelBox, f64)>,
+    /// The fish tracked on this frame.
+    pub tracks: Vec<TrackRecord>,
+    /// The reference objects in view: their pixel, and the last metric fit's residual there
+    /// (fitted minus known depth, m; NaN when there is no fit or no depth reading).
+    pub references: Vec<(crate::geometry::Pixel, f64)>,
+}
+
+impl FrameView {
+    /// Empties the view, keeping its capacity.
+    pub fn clear(&mut self) {
+        self.detected = false;
+        self.detections.clear();
+        self.tracks.clear();
+        self.references.clear();
+    }
+}
+
+/// A per-frame pipeline failure.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// The frame could not be decoded.
+    #[error("frame {seq}: cannot decode: {message}")]
+    Decode {
+        /// Frame sequence number.
+        seq: u64,
+        /// Decoder message.
+        message: String,
+    },
+    /// A stage (detector, depth, ...) failed.
+    #[error("{stage}: {message}")]
+    Stage {
+        /// Stage name.
+        stage: &'static str,
+        /// What went wrong.
+        message: String,
+    },
+}
