@@ -2,13 +2,13 @@
 //! the daemon runs on every frame. `cargo bench --bench core` (or `make bench-core`).
 
 use fme::geometry::{Camera, Intrinsics, PixelBox, Pose, WorldPoint};
-use fme::motion::{ActivityEstimator, AlongRay, MotionConfig, TrackObservation};
+use fme::motion::{ActivityEstimator, AlongRay, MotionConfig, Observation};
 use fme::postprocess::PostprocessConfig;
 use fme::units::{Metres, Seconds};
 use std::hint::black_box;
 use std::time::Instant;
 
-fn frame(i: usize, n: u32, obs: &mut Vec<TrackObservation>) -> Seconds {
+fn frame(i: usize, n: u32, obs: &mut Vec<Observation>) -> Seconds {
     obs.clear();
     let t = i as f64 / 30.0;
     for id in 0..n {
@@ -18,7 +18,7 @@ fn frame(i: usize, n: u32, obs: &mut Vec<TrackObservation>) -> Seconds {
             - if (i + id as usize).is_multiple_of(23) { 1.0 } else { 0.0 };
         let u = 320.0 + 200.0 * (t * 0.5 + ph).sin();
         let v = 192.0 + 120.0 * (t * 0.3 + ph).cos();
-        obs.push(TrackObservation { id, bbox: PixelBox::new(u - w / 2.0, v - 8.0, w, 16.0), depth: Some(Metres(d)) });
+        obs.push(Observation { id, bbox: PixelBox::new(u - w / 2.0, v - 8.0, w, 16.0), depth: Some(Metres(d)) });
     }
     Seconds(t)
 }
@@ -31,7 +31,7 @@ fn run(label: &str, n: u32, post: PostprocessConfig, along_ray: AlongRay) {
     let mut est = ActivityEstimator::new(Camera { intrinsics: k, pose }, motion, post);
     let frames = 3000;
     // Pre-build the inputs so only the estimator is timed.
-    let mut inputs: Vec<(Seconds, Vec<TrackObservation>)> = Vec::with_capacity(frames);
+    let mut inputs: Vec<(Seconds, Vec<Observation>)> = Vec::with_capacity(frames);
     for i in 0..frames {
         let mut obs = Vec::with_capacity(n as usize);
         let t = frame(i, n, &mut obs);

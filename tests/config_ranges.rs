@@ -7,7 +7,7 @@
 use fme::config::Config;
 use fme::geometry::{Camera, Intrinsics, PixelBox, Pose, WorldPoint};
 use fme::infer::InferSchedule;
-use fme::motion::{ActivityEstimator, TrackObservation};
+use fme::motion::{ActivityEstimator, Observation};
 use fme::output::bank::RegisterBank;
 use fme::output::feeding::FeedingRule;
 use fme::service::publish::Publisher;
@@ -69,8 +69,8 @@ fn build_and_run(cfg: &Config) -> Result<(), String> {
         let x = 100.0 + 3.0 * f64::from(i);
         let dets = [Detection::new(PixelBox::new(x, 150.0, 60.0, 25.0), 0.9)];
         let tracks = tracker.update(t, &dets).map_err(|e| e.to_string())?;
-        let obs: Vec<TrackObservation> =
-            tracks.iter().map(|o| TrackObservation { id: o.id, bbox: o.bbox, depth: Some(Metres(2.0)) }).collect();
+        let obs: Vec<Observation> =
+            tracks.iter().map(|o| Observation { id: o.id, bbox: o.bbox, depth: Some(Metres(2.0)) }).collect();
         let s = est.update(t, &obs);
         let _ = feeding.update(t.get(), s.smoothed.map(|v| v.get()));
     }

@@ -2,7 +2,7 @@
 //! counting global allocator (its own test binary so no other test's allocations interfere).
 
 use fme::geometry::{Camera, Intrinsics, PixelBox, Pose, WorldPoint};
-use fme::motion::{ActivityEstimator, MotionConfig, TrackObservation};
+use fme::motion::{ActivityEstimator, MotionConfig, Observation};
 use fme::postprocess::PostprocessConfig;
 use fme::units::{Metres, Seconds};
 
@@ -16,8 +16,8 @@ fn steady_state_update_allocates_nothing() {
         Pose::look_at(WorldPoint::new(3.0, -0.5, 1.5), WorldPoint::new(3.0, 3.0, 1.2), nalgebra::Vector3::z()).unwrap();
     let cam = Camera { intrinsics: k, pose };
     let mut est = ActivityEstimator::new(cam, MotionConfig::default(), PostprocessConfig::paper());
-    let mut obs: Vec<TrackObservation> = Vec::with_capacity(100);
-    let frame = |i: usize, obs: &mut Vec<TrackObservation>| {
+    let mut obs: Vec<Observation> = Vec::with_capacity(100);
+    let frame = |i: usize, obs: &mut Vec<Observation>| {
         obs.clear();
         let t = i as f64 / 30.0;
         for id in 0..100u32 {
@@ -28,11 +28,7 @@ fn steady_state_update_allocates_nothing() {
                 - if (i + id as usize).is_multiple_of(23) { 1.0 } else { 0.0 };
             let u = 320.0 + 200.0 * (t * 0.5 + ph).sin();
             let v = 192.0 + 120.0 * (t * 0.3 + ph).cos();
-            obs.push(TrackObservation {
-                id,
-                bbox: PixelBox::new(u - w / 2.0, v - 8.0, w, 16.0),
-                depth: Some(Metres(d)),
-            });
+            obs.push(Observation { id, bbox: PixelBox::new(u - w / 2.0, v - 8.0, w, 16.0), depth: Some(Metres(d)) });
         }
         Seconds(t)
     };

@@ -55,11 +55,11 @@ fn bundled_models_on_the_bundled_recording_give_calibrated_plausible_activity() 
     assert!(h.detector_ok && h.depth_ok, "{h:?}");
     // Rates on frame time: 10 Hz detection and 5 Hz depth on a 30 fps recording.
     assert!((h.detector_hz - 10.0).abs() < 0.5 && (h.depth_hz - 5.0).abs() < 0.5, "{h:?}");
-    let c = p.calib();
-    assert!(c.calibrated && c.references_visible >= 3, "{c:?}");
+    let c = p.fit_state();
+    assert!(c.fitted && c.references_visible >= 3, "{c:?}");
     // After the 1 s speed span, the swarm (20 fish, some hidden) is tracked and measured.
     let late = &samples[45..];
-    assert!(late.iter().all(|s| !s.flags.depth_uncalibrated));
+    assert!(late.iter().all(|s| !s.flags.unfitted));
     let fish: Vec<u32> = late.iter().map(|s| s.fish).collect();
     let mean_fish = fish.iter().sum::<u32>() as f64 / fish.len() as f64;
     assert!((8.0..=26.0).contains(&mean_fish), "fish per frame {fish:?}");
@@ -83,7 +83,7 @@ fn without_calibration_fish_are_counted_but_no_speed_is_claimed() {
     let mut p = FishPipeline::new(&cfg.pipeline(), None).expect("pipeline");
     let samples = run(&mut p, &frames()[..60]);
     let last = samples.last().expect("samples");
-    assert!(last.flags.depth_uncalibrated && !p.calib().calibrated);
+    assert!(last.flags.unfitted && !p.fit_state().fitted);
     assert!(last.mean.0.is_nan(), "no speed without metric depth: {last:?}");
     assert!(p.health().tracks >= 5, "fish still tracked: {:?}", p.health());
 }
@@ -94,10 +94,10 @@ fn without_calibration_the_fish_are_the_ruler() {
     // fish of `motion.body_length_m` as the ruler once they have been seen in 10 depth frames (2 s).
     let mut p = FishPipeline::new(&config().pipeline(), None).expect("pipeline");
     let samples = run(&mut p, &frames());
-    let c = p.calib();
-    assert!(c.calibrated && c.source == fme::pipeline::ScaleSource::Fish && c.fish_rulers >= 3, "{c:?}");
+    let c = p.fit_state();
+    assert!(c.fitted && c.source == fme::pipeline::ScaleSource::Fish && c.fish_rulers >= 3, "{c:?}");
     let last = samples.last().expect("samples");
-    assert!(!last.flags.depth_uncalibrated && last.mean.0.is_finite(), "{last:?}");
+    assert!(!last.flags.unfitted && last.mean.0.is_finite(), "{last:?}");
     // Plausible, not scored (docs/accuracy.md has the scores): within a factor 2 of the truth.
     let truth = true_mean(100, 120);
     assert!(last.mean.0 > 0.5 * truth && last.mean.0 < 2.0 * truth, "{} vs {truth}", last.mean.0);

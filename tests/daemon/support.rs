@@ -59,7 +59,7 @@ pub fn test_config(seq: &Path) -> Config {
 /// Test double for the daemon's edges: the "activity" is the mean absolute
 /// grey-level change between consecutive frames on a coarse grid, scaled by `scale_mps` per unit of
 /// mean change per second. It exercises every edge of the daemon with values that move with the
-/// scene; it is **not** a fish-speed estimate and always flags `depth_uncalibrated`.
+/// scene; it is **not** a fish-speed estimate and always flags `unfitted`.
 #[derive(Debug)]
 pub struct FrameDiffPipeline {
     prev: Vec<u8>,
@@ -148,7 +148,7 @@ impl Pipeline for FrameDiffPipeline {
             ci95_half: MetresPerSecond(ci),
             fish: 0,
             latency: Seconds(0.0),
-            flags: QualityFlags { too_few_fish: true, depth_uncalibrated: true, stale: false, unlike_fish: false },
+            flags: QualityFlags { too_few_fish: true, unfitted: true, stale: false, unlike_fish: false },
             scale: fme::pipeline::ScaleSource::None,
         }))
     }

@@ -33,7 +33,7 @@ impl crate::choice::Choice for SpeedMethod {
 
 /// One stored observation of a track.
 #[derive(Debug, Clone, Copy)]
-struct Sample {
+struct Position {
     /// Frame time, s.
     t: f64,
     /// Box centre lifted with the corrected depth, camera frame, m (speed norms are the same as in
@@ -45,7 +45,7 @@ struct Sample {
     apparent: f64,
 }
 
-impl Sample {
+impl Position {
     /// Unit line of sight: what the box motion measures without depth.
     fn unit(&self) -> [f64; 3] {
         [self.p[0] / self.range, self.p[1] / self.range, self.p[2] / self.range]
@@ -53,17 +53,17 @@ impl Sample {
 }
 
 /// Within `span` of `t` (the same tolerance everywhere).
-fn within(sample: &Sample, t: f64, span: f64) -> bool {
+fn within(sample: &Position, t: f64, span: f64) -> bool {
     t - sample.t <= span * (1.0 + 1e-6) + 1e-9
 }
 
 /// Least-squares velocity of `coords(sample)` over the samples within `span` of `t`; `None` for
 /// fewer than 3. Returns the velocity's norm and the time it refers to (the window's mean time).
 fn regression_speed(
-    samples: &Deque<Sample, POSITIONS>,
+    samples: &Deque<Position, POSITIONS>,
     t: f64,
     span: f64,
-    coords: impl Fn(&Sample) -> [f64; 3],
+    coords: impl Fn(&Position) -> [f64; 3],
 ) -> Option<(f64, f64)> {
     let inside = || samples.iter().filter(|p| within(p, t, span));
     let n = inside().count();
@@ -190,7 +190,7 @@ impl MotionConfig {
 
 /// One tracked fish in one frame, as the tracker (or ground truth) gives it.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TrackObservation {
+pub struct Observation {
     /// Track identity, stable across frames.
     pub id: u32,
     /// The box in pixels.
@@ -229,7 +229,7 @@ pub struct SwarmEstimate {
 
 /// A track's state after the last update, for evaluation and diagnostics.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TrackView {
+pub struct Fish {
     /// Track identity.
     pub id: u32,
     /// Time of its last observation.
@@ -256,7 +256,7 @@ struct FishMotion {
     first_seen: f64,
     last_seen: f64,
     filter: TrackFilter,
-    positions: Deque<Sample, POSITIONS>,
+    positions: Deque<Position, POSITIONS>,
     bbox: PixelBox,
     depth_measured: Option<Metres>,
     depth: Option<Metres>,
@@ -347,8 +347,8 @@ impl ActivityEstimator {
     }
 
     /// Tracks currently held (seen within `motion.track_timeout_s`).
-    pub fn tracks(&self) -> impl Iterator<Item = TrackView> + '_ {
-        self.tracks.iter().map(|s| TrackView {
+    pub fn tracks(&self) -> impl Iterator<Item = Fish> + '_ {
+        self.tracks.iter().map(|s| Fish {
             id: s.id,
             last_seen: Seconds(s.last_seen),
             bbox: s.bbox,
@@ -365,7 +365,7 @@ impl ActivityEstimator {
     }
 
     /// One frame, with the depth carried by each observation (sampled at the raw box centre).
-    pub fn update(&mut self, t: Seconds, observations: &[TrackObservation]) -> SwarmEstimate {
+    pub fn update(&mut self, t: Seconds, observations: &[Observation]) -> SwarmEstimate {
         self.update_with(t, observations, |o, _| o.depth)
     }
 
@@ -374,8 +374,8 @@ impl ActivityEstimator {
     pub fn update_with(
         &mut self,
         t: Seconds,
-        observations: &[TrackObservation],
-        mut depth_at: impl FnMut(&TrackObservation, Pixel) -> Option<Metres>,
+        observations: &[Observation],
+        mut depth_at: impl FnMut(&Observation, Pixel) -> Option<Metres>,
     ) -> SwarmEstimate {
         let mut out = SwarmEstimate { t, ..Default::default() };
         let (mut n, mut sum, mut sum_sq, mut lag) = (0usize, 0.0, 0.0, 0.0);
@@ -447,10 +447,10 @@ impl ActivityEstimator {
             }
             let span = self.motion.speed_span_s.0;
             let reference = s.positions.iter().find(|p| within(p, t.0, span)).or(s.positions.back()).copied();
-            let now = Sample { t: t.0, p: [point.0.x, point.0.y, point.0.z], range, apparent };
+            let now = Position { t: t.0, p: [point.0.x, point.0.y, point.0.z], range, apparent };
             let _ = s.positions.push_back(now);
             let Some(reference) = reference else { continue };
-            let regression = |coords: fn(&Sample) -> [f64; 3]| match self.motion.speed_method {
+            let regression = |coords: fn(&Position) -> [f64; 3]| match self.motion.speed_method {
                 SpeedMethod::Regression => regression_speed(&s.positions, t.0, span, coords),
                 SpeedMethod::Chord => None,
             };
@@ -474,7 +474,7 @@ impl ActivityEstimator {
                     }
                     let range = range_sum / n_in as f64;
                     let (across, t_ref) =
-                        regression(Sample::unit).map(|(w, tm)| (w * range, tm)).unwrap_or_else(|| {
+                        regression(Position::unit).map(|(w, tm)| (w * range, tm)).unwrap_or_else(|| {
                             (range * angle_between(now.p, reference.p) / (t.0 - reference.t), chord_time)
                         });
                     let depth_chord = regression(|p| p.p)
@@ -538,10 +538,10 @@ mod tests {
     }
 
     /// Observation of a fish whose box centre is at world point `p`, box 40 x 16 px.
-    fn observe(cam: &Camera, id: u32, p: WorldPoint) -> TrackObservation {
+    fn observe(cam: &Camera, id: u32, p: WorldPoint) -> Observation {
         let px = cam.world_to_pixel(&p).unwrap();
         let depth = cam.pose.to_camera(&p).depth();
-        TrackObservation { id, bbox: PixelBox::from_center(px, 40.0, 16.0), depth: Some(depth) }
+        Observation { id, bbox: PixelBox::from_center(px, 40.0, 16.0), depth: Some(depth) }
     }
 
     #[test]
@@ -721,7 +721,7 @@ mod tests {
                         0.08 * fy / z,
                     );
                     let scatter = 0.1 * (k as f64 * 2.399 + i as f64).sin();
-                    obs.push(TrackObservation { id: i as u32, bbox, depth: Some(Metres(z + scatter)) });
+                    obs.push(Observation { id: i as u32, bbox, depth: Some(Metres(z + scatter)) });
                 }
                 est.update(Seconds(t), &obs);
             }
@@ -770,7 +770,7 @@ mod tests {
                             end(0.5) - end(-0.5),
                             0.2 * len * cam.intrinsics.fy / z.0,
                         );
-                        TrackObservation { id: i as u32, bbox, depth: Some(z) }
+                        Observation { id: i as u32, bbox, depth: Some(z) }
                     })
                     .collect();
                 est.update(Seconds(t), &obs);
@@ -799,12 +799,11 @@ mod tests {
         let cfg = MotionConfig { min_age_s: Seconds(0.0), ..Default::default() };
         let mut est = ActivityEstimator::with_capacity(1, cam, cfg, PostprocessConfig::off());
         let good = observe(&cam, 1, WorldPoint::new(0.0, 1.0, 1.5));
-        let nan_box =
-            TrackObservation { id: 2, bbox: PixelBox::new(f64::NAN, 0.0, 1.0, 1.0), depth: Some(Metres(1.0)) };
-        let no_depth = TrackObservation { depth: None, ..good };
+        let nan_box = Observation { id: 2, bbox: PixelBox::new(f64::NAN, 0.0, 1.0, 1.0), depth: Some(Metres(1.0)) };
+        let no_depth = Observation { depth: None, ..good };
         let s = est.update(Seconds(0.0), &[good, nan_box]);
         assert_eq!(s.skipped, 1);
-        let s = est.update(Seconds(0.1), &[no_depth, TrackObservation { id: 3, ..good }]);
+        let s = est.update(Seconds(0.1), &[no_depth, Observation { id: 3, ..good }]);
         assert_eq!(s.skipped, 2, "no depth, and the table (1 track) is full");
         let s = est.update(Seconds(0.1), &[good]);
         assert_eq!(s.skipped, 1, "time did not increase for track 1");

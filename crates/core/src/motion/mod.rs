@@ -17,8 +17,6 @@ mod estimator;
 pub mod heading;
 mod stats;
 
-pub use estimator::{
-    ActivityEstimator, MAX_FISH, MotionConfig, SpeedMethod, SwarmEstimate, TrackObservation, TrackView,
-};
+pub use estimator::{ActivityEstimator, Fish, MAX_FISH, MotionConfig, Observation, SpeedMethod, SwarmEstimate};
 pub use heading::AlongRay;
 pub use stats::{mean_ci95, student_t975};

@@ -15,10 +15,10 @@
 
 use super::PipelineConfig;
 use super::rate::RateMeter;
-use super::substitute::{DepthView, Substitute};
+use super::substitute::{DepthGrid, Substitute};
 use super::{
-    ActivitySample, CalibInfo, Calibration, Frame, FrameView, Pipeline, PipelineError, QualityFlags, ScaleSource,
-    StageHealth, TrackRecord,
+    ActivitySample, Calibration, DepthFitState, Frame, FrameOutcome, Pipeline, PipelineError, QualityFlags,
+    ScaleSource, StageHealth, TrackRecord,
 };
 use crate::familiarity::FamiliarityMonitor;
 use crate::geometry::{Camera, PixelBox};
@@ -28,7 +28,7 @@ use crate::metric::{
     ReferenceFootprints, ReferencePoints, References, Rulers, fit_rulers, sample_fish,
 };
 use crate::motion::heading::apparent_length;
-use crate::motion::{ActivityEstimator, SwarmEstimate, TrackObservation, TrackView};
+use crate::motion::{ActivityEstimator, Fish, Observation, SwarmEstimate};
 use crate::track::{self, Tracker};
 use crate::units::{Metres, MetresPerSecond};
 
@@ -69,12 +69,12 @@ pub struct FishPipeline {
     /// The cohort length measured under the references' fit (`depth.learn_fish_length`).
     learned_length: LengthLearner,
     /// The estimator's tracks, copied for the fish fit (allocated once).
-    views: Vec<TrackView>,
-    calib: CalibInfo,
+    views: Vec<Fish>,
+    fit_state: DepthFitState,
     rgb: Vec<u8>,
     dets: Vec<track::Detection>,
     given: Vec<(u32, PixelBox)>,
-    obs: Vec<TrackObservation>,
+    obs: Vec<Observation>,
     ran: FramePlan,
     estimate: SwarmEstimate,
     last_t: Option<f64>,
@@ -170,7 +170,7 @@ impl FishPipeline {
             tracker: Tracker::new(cfg.tracker),
             familiarity: FamiliarityMonitor::new(cfg.familiarity),
             estimator: ActivityEstimator::new(camera, cfg.motion, cfg.postprocess),
-            calib: CalibInfo { references_visible: refs.len() as u32, ..CalibInfo::default() },
+            fit_state: DepthFitState { references_visible: refs.len() as u32, ..DepthFitState::default() },
             refs,
             footprints,
             fit: None,
@@ -204,7 +204,7 @@ impl FishPipeline {
     }
 
     /// The tracked boxes that entered the estimator on the last frame.
-    pub fn observations(&self) -> &[TrackObservation] {
+    pub fn observations(&self) -> &[Observation] {
         &self.obs
     }
 
@@ -220,7 +220,7 @@ impl FishPipeline {
     }
 
     /// The estimator's tracks after the last frame.
-    pub fn tracks(&self) -> impl Iterator<Item = TrackView> + '_ {
+    pub fn tracks(&self) -> impl Iterator<Item = Fish> + '_ {
         self.estimator.tracks()
     }
 
@@ -247,7 +247,7 @@ impl FishPipeline {
     }
 
     /// The depth map the pipeline samples now: the network's last map, or the substitute's.
-    fn depth_view(&self) -> Option<&dyn DepthView> {
+    fn depth_view(&self) -> Option<&dyn DepthGrid> {
         depth_view(&self.depth, &self.substitute)
     }
 
@@ -280,7 +280,7 @@ impl FishPipeline {
             DepthScale::Fish => false,
         };
         if by_refs && !self.refs.is_empty() {
-            self.calib.references_visible = refs.len() as u32;
+            self.fit_state.references_visible = refs.len() as u32;
             match self.cfg.depth.fit.fit(&refs, ROBUST_INLIER) {
                 Ok(f) => {
                     let residual = f.scale_shift().map_or(f64::NAN, |ss| ss.residual_rms.0);
@@ -325,12 +325,12 @@ impl FishPipeline {
             None => (f64::NAN, f64::NAN, f64::NAN),
         };
         self.fit = Some(f);
-        self.calib = CalibInfo {
+        self.fit_state = DepthFitState {
             scale,
             shift,
             residual_m: residual,
             references_visible: visible as u32,
-            calibrated: true,
+            fitted: true,
             source: ScaleSource::References,
             fish_rulers: 0,
             ruler_length_m: self.learned_length.length().map_or(0.0, |l| l.0),
@@ -388,7 +388,7 @@ impl FishPipeline {
         if !fit {
             return;
         }
-        self.calib.references_visible = refs.len() as u32;
+        self.fit_state.references_visible = refs.len() as u32;
         match fit_rulers(&pairs, self.cfg.motion.body_length_cv) {
             Ok(f) => {
                 let f = self.fish_fit.update(t_s, f);
@@ -397,12 +397,12 @@ impl FishPipeline {
                 self.fit_stats.residuals += 1;
                 self.fit_stats.rejected += u64::from(f.rejected.count_ones());
                 self.fit = Some(DepthFit::ScaleShift(f));
-                self.calib = CalibInfo {
+                self.fit_state = DepthFitState {
                     scale: f.s,
                     shift: f.t,
                     residual_m: f.residual_rms.0,
                     references_visible: refs.len() as u32,
-                    calibrated: true,
+                    fitted: true,
                     source: ScaleSource::Fish,
                     fish_rulers: rulers,
                     ruler_length_m: length.0,
@@ -479,9 +479,9 @@ impl FishPipeline {
 }
 
 /// The depth map sampled now: the network's last map, or the substitute's.
-fn depth_view<'a>(net: &'a Option<DepthNet>, sub: &'a Option<Box<dyn Substitute>>) -> Option<&'a dyn DepthView> {
+fn depth_view<'a>(net: &'a Option<DepthNet>, sub: &'a Option<Box<dyn Substitute>>) -> Option<&'a dyn DepthGrid> {
     match (net, sub) {
-        (Some(net), _) => net.last_map().map(|m| m as &dyn DepthView),
+        (Some(net), _) => net.last_map().map(|m| m as &dyn DepthGrid),
         (None, Some(s)) => s.depth(),
         (None, None) => None,
     }
@@ -549,10 +549,10 @@ impl Pipeline for FishPipeline {
                 self.given.clear();
                 s.tracks(frame, &mut self.given)
                     .map_err(|message| PipelineError::Stage { stage: "tracks", message })?;
-                self.obs.extend(self.given.iter().map(|&(id, bbox)| TrackObservation { id, bbox, depth: None }));
+                self.obs.extend(self.given.iter().map(|&(id, bbox)| Observation { id, bbox, depth: None }));
             }
         } else {
-            self.obs.extend(self.tracker.confirmed().map(|o| TrackObservation { id: o.id, bbox: o.bbox, depth: None }));
+            self.obs.extend(self.tracker.confirmed().map(|o| Observation { id: o.id, bbox: o.bbox, depth: None }));
         }
         self.health.tracks = self.obs.len() as u32;
         self.health.detector_hz = self.det_rate.hz();
@@ -560,8 +560,8 @@ impl Pipeline for FishPipeline {
         // On the fish's scale with the configured length, every fish is as long as the ruler
         // (`ActivityEstimator::set_ruler_length`). With a length measured under the references the
         // fit carries their scale on, and the lengths measured under it with it.
-        let ruler = (self.calib.source == ScaleSource::Fish && !self.calib.ruler_length_learned)
-            .then_some(Metres(self.calib.ruler_length_m));
+        let ruler = (self.fit_state.source == ScaleSource::Fish && !self.fit_state.ruler_length_learned)
+            .then_some(Metres(self.fit_state.ruler_length_m));
         self.estimator.set_ruler_length(ruler);
         // Field by field, so the estimator can be borrowed mutably beside it.
         let view = depth_view(&self.depth, &self.substitute);
@@ -594,11 +594,11 @@ impl Pipeline for FishPipeline {
             latency: s.latency,
             flags: QualityFlags {
                 too_few_fish: (s.n_fish as u32) < self.cfg.motion.min_fish,
-                depth_uncalibrated: !metric,
+                unfitted: !metric,
                 stale: false,
                 unlike_fish: self.familiarity.unlike_fish(),
             },
-            scale: self.calib.source,
+            scale: self.fit_state.source,
         }))
     }
 
@@ -606,11 +606,11 @@ impl Pipeline for FishPipeline {
         self.health
     }
 
-    fn calib(&self) -> CalibInfo {
-        self.calib
+    fn fit_state(&self) -> DepthFitState {
+        self.fit_state
     }
 
-    fn frame_view(&self, out: &mut FrameView, references: bool) {
+    fn frame_outcome(&self, out: &mut FrameOutcome, references: bool) {
         out.clear();
         out.detected = self.ran.detect;
         if self.ran.detect {

@@ -23,7 +23,7 @@ pub use config::PipelineConfig;
 
 pub use fish::{FishPipeline, FitStats};
 pub use frame::{Frame, PixelFormat};
-pub use substitute::{DepthView, Substitute};
+pub use substitute::{DepthGrid, Substitute};
 
 use crate::units::{MetresPerSecond, Seconds};
 
@@ -33,7 +33,7 @@ pub struct QualityFlags {
     /// Fewer tracked fish than `motion.min_fish`.
     pub too_few_fish: bool,
     /// No metric depth fit yet (reference objects not seen): speeds are in uncalibrated units.
-    pub depth_uncalibrated: bool,
+    pub unfitted: bool,
     /// The value is older than `output.stale_after_s` (set by the service, not the pipeline).
     pub stale: bool,
     /// The detections look unlike fish (`[familiarity]`, status bit 10): the value is not to be
@@ -87,7 +87,7 @@ pub struct StageHealth {
 
 /// Metric depth calibration state (paper eq. 1-2), shown by the console `calib` command.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct CalibInfo {
+pub struct DepthFitState {
     /// Fitted scale s.
     pub scale: f64,
     /// Fitted shift t.
@@ -97,7 +97,7 @@ pub struct CalibInfo {
     /// Reference objects visible in the last depth frame.
     pub references_visible: u32,
     /// Whether a fit is available.
-    pub calibrated: bool,
+    pub fitted: bool,
     /// What set the scale of the fit in use (`depth.scale`).
     pub source: ScaleSource,
     /// Fish used as rulers in the last fish fit.
@@ -145,8 +145,8 @@ pub trait Pipeline: Send {
     /// Current stage health.
     fn health(&self) -> StageHealth;
     /// Current calibration.
-    fn calib(&self) -> CalibInfo {
-        CalibInfo::default()
+    fn fit_state(&self) -> DepthFitState {
+        DepthFitState::default()
     }
     /// Writes one line per confirmed track (console `tracks`), at most `max` lines.
     fn describe_tracks(&self, _out: &mut dyn std::fmt::Write, _max: usize) -> std::fmt::Result {
@@ -155,7 +155,7 @@ pub trait Pipeline: Send {
     /// Fills `out` with what the last frame produced (the black box and snapshots,
     /// docs/recording.md): detections and tracks; the references only with `references` (they cost
     /// a depth reading each, so only snapshots ask for them). The default: nothing.
-    fn frame_view(&self, out: &mut FrameView, references: bool) {
+    fn frame_outcome(&self, out: &mut FrameOutcome, references: bool) {
         let _ = references;
         out.clear();
     }
@@ -181,7 +181,7 @@ pub struct TrackRecord {
 
 /// What one frame produced: the detections (when the detector ran on it) and the tracked fish.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct FrameView {
+pub struct FrameOutcome {
     /// The detector ran on this frame.
     pub detected: bool,
     /// Its detections: box and score.
@@ -193,7 +193,7 @@ pub struct FrameView {
     pub references: Vec<(crate::geometry::Pixel, f64)>,
 }
 
-impl FrameView {
+impl FrameOutcome {
     /// Empties the view, keeping its capacity.
     pub fn clear(&mut self) {
         self.detected = false;

@@ -8,7 +8,7 @@ use crate::metric::MapKind;
 use crate::track::Detection;
 
 /// A depth map as the pipeline samples it: the network's relative inverse depth, or a map swapped in.
-pub trait DepthView {
+pub trait DepthGrid {
     /// What the values are: relative inverse depth (needs the metric fit, eq. 1-2) or metres.
     fn kind(&self) -> MapKind;
     /// The value at `px` read with the map's point window (a small median).
@@ -17,7 +17,7 @@ pub trait DepthView {
     fn grid(&self, px: Pixel) -> Option<f64>;
 }
 
-impl DepthView for RelDepthMap {
+impl DepthGrid for RelDepthMap {
     fn kind(&self) -> MapKind {
         MapKind::InverseDepth
     }
@@ -57,7 +57,7 @@ pub trait Substitute: Send {
         Ok(())
     }
     /// The depth map last loaded (held until the next depth frame, as the network's is).
-    fn depth(&self) -> Option<&dyn DepthView> {
+    fn depth(&self) -> Option<&dyn DepthGrid> {
         None
     }
 }

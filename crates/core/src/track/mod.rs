@@ -50,4 +50,4 @@ pub mod kalman;
 mod tracker;
 
 pub use config::{Mode, TrackerConfig, TrackerConfigError, TrackerPreset};
-pub use tracker::{Detection, MAX_DETS, MAX_TRACKS, TrackError, TrackOutput, Tracker, TrackerStats};
+pub use tracker::{Detection, MAX_DETS, MAX_TRACKS, Track, TrackError, Tracker, TrackerStats};

@@ -25,7 +25,7 @@ enum TrackState {
 
 /// A reported track at the current frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TrackOutput {
+pub struct Track {
     /// Track identity, from 1.
     pub id: u32,
     /// Filtered box.
@@ -75,7 +75,7 @@ enum Filter {
 }
 
 #[derive(Debug, Clone, Copy)]
-struct Track {
+struct TrackSlot {
     id: u32,
     filter: Filter,
     state: TrackState,
@@ -92,7 +92,7 @@ struct Track {
     pred: PixelBox,
 }
 
-impl Track {
+impl TrackSlot {
     fn bbox(&self) -> PixelBox {
         match &self.filter {
             Filter::Sort(k) => k.bbox(),
@@ -121,7 +121,7 @@ const ASSIGN_N: usize = MAX_DETS + 1;
 /// `update` never allocate.
 pub struct Tracker {
     cfg: TrackerConfig,
-    tracks: heapless::Vec<Track, MAX_TRACKS>,
+    tracks: heapless::Vec<TrackSlot, MAX_TRACKS>,
     dets: heapless::Vec<Detection, MAX_DETS>,
     det_used: [bool; MAX_DETS],
     trk_used: [bool; MAX_TRACKS],
@@ -134,7 +134,7 @@ pub struct Tracker {
     cmap: [u16; MAX_DETS],
     cost: Box<[f64]>,
     assigner: Box<FixedAssigner<ASSIGN_N>>,
-    outputs: heapless::Vec<TrackOutput, MAX_TRACKS>,
+    outputs: heapless::Vec<Track, MAX_TRACKS>,
     next_id: u32,
     last_t: Option<f64>,
     predicted_t: Option<f64>,
@@ -191,16 +191,16 @@ impl Tracker {
     /// Tracks reported at the last update: confirmed tracks matched at that frame (in sort mode,
     /// SORT's rule `time_since_update < 1 and (hit_streak >= min_hits or frame <= min_hits)`, in
     /// SORT's order).
-    pub fn outputs(&self) -> &[TrackOutput] {
+    pub fn outputs(&self) -> &[Track] {
         &self.outputs
     }
 
     /// The tracks reported at the last update, with their box at the last predicted time (after
     /// [`Tracker::predict`] on a frame without detections, the propagated box) and age up to it.
-    pub fn confirmed(&self) -> impl Iterator<Item = TrackOutput> + '_ {
+    pub fn confirmed(&self) -> impl Iterator<Item = Track> + '_ {
         let now = self.predicted_t.unwrap_or(0.0);
         self.outputs.iter().filter_map(move |o| {
-            self.tracks.iter().find(|t| t.id == o.id).map(|t| TrackOutput {
+            self.tracks.iter().find(|t| t.id == o.id).map(|t| Track {
                 bbox: t.bbox(),
                 age: Seconds(now - t.t_first),
                 ..*o
@@ -255,7 +255,7 @@ impl Tracker {
 
     /// Processes the detections of the frame at time `t`: predicts (if not done for `t`),
     /// associates, updates, starts and ends tracks, and refreshes [`Tracker::outputs`].
-    pub fn update(&mut self, t: Seconds, detections: &[Detection]) -> Result<&[TrackOutput], TrackError> {
+    pub fn update(&mut self, t: Seconds, detections: &[Detection]) -> Result<&[Track], TrackError> {
         if let Some(p) = self.predicted_t.filter(|&p| p > t.get()) {
             // The filters were already propagated past `t`: updating in their past is not possible.
             return Err(TrackError::TimeNotIncreasing { t: t.get(), prev: p });
@@ -327,7 +327,7 @@ impl Tracker {
             Mode::Byte => Filter::Cv(CvKalman::new(&d.bbox, self.cfg.noise)),
         };
         let confirmed = self.cfg.mode == Mode::Byte && self.cfg.min_hits <= 1;
-        let tr = Track {
+        let tr = TrackSlot {
             id: self.next_id,
             filter,
             state: if confirmed { TrackState::Confirmed } else { TrackState::Tentative },
@@ -347,8 +347,8 @@ impl Tracker {
         }
     }
 
-    fn output_of(tr: &Track, t: f64) -> TrackOutput {
-        TrackOutput {
+    fn output_of(tr: &TrackSlot, t: f64) -> Track {
+        Track {
             id: tr.id,
             bbox: tr.bbox(),
             score: tr.score,
@@ -457,7 +457,7 @@ impl Tracker {
         min_iou: f64,
         fuse: bool,
         buffered: bool,
-        trk: impl Fn(&Track) -> bool,
+        trk: impl Fn(&TrackSlot) -> bool,
         det: impl Fn(&Detection) -> bool,
     ) {
         self.rows.clear();

@@ -325,8 +325,8 @@ last {}",
                 Ok(())
             }
             ("calib", None, _) => {
-                let c = shared.health().calib;
-                if c.calibrated {
+                let c = shared.health().fit_state;
+                if c.fitted {
                     let _ = write!(
                         body,
                         "scale {:.6}\nshift {:.6}\nresidual {:.3} m\nreferences-visible {}\nscale-from {}",

@@ -360,12 +360,12 @@ pub fn families(s: &Snapshot, e: &mut Exposition) {
     e.gauge(
         "fme_calibration_residual_meters",
         "RMS residual of the metric depth fit on the reference objects (paper eq. 1-2), m; NaN when uncalibrated.",
-        if h.calib.calibrated { h.calib.residual_m } else { nan },
+        if h.fit_state.fitted { h.fit_state.residual_m } else { nan },
     );
     e.gauge(
         "fme_calibration_references_visible",
         "Reference objects visible in the last depth frame.",
-        f64::from(h.calib.references_visible),
+        f64::from(h.fit_state.references_visible),
     );
     let l = &h.latency;
     let buckets: Vec<(f64, u64)> =

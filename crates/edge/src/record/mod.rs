@@ -21,7 +21,7 @@ pub mod snapshot;
 
 use crate::config::Config;
 use crate::status::Shared;
-use fme_core::pipeline::{ActivitySample, Frame, FrameView, Pipeline, PixelFormat, StageHealth};
+use fme_core::pipeline::{ActivitySample, Frame, FrameOutcome, Pipeline, PixelFormat, StageHealth};
 use freeze::FreezeInputs;
 use ring::{Ring, RingEntry};
 use std::path::{Path, PathBuf};
@@ -37,7 +37,7 @@ pub struct FrameRecord {
     /// The frame (bytes as received).
     pub frame: Option<Frame>,
     /// What the pipeline produced on it.
-    pub view: FrameView,
+    pub view: FrameOutcome,
     /// Its activity sample.
     pub sample: Option<ActivitySample>,
     /// Write it to the ring.
@@ -387,7 +387,7 @@ impl Recorder {
             }
             None => r.frame = Some(frame.clone()),
         }
-        pipeline.frame_view(&mut r.view, snap);
+        pipeline.frame_outcome(&mut r.view, snap);
         r.sample = sample;
         r.ring = ring;
         r.snapshot = snap;
@@ -432,7 +432,7 @@ impl Recorder {
         if let Some(s) = sample
             && label.is_none()
             && !s.flags.too_few_fish
-            && !s.flags.depth_uncalibrated
+            && !s.flags.unfitted
             && s.smoothed.0.is_finite()
         {
             let (low, high) = self.alarm;
@@ -474,8 +474,8 @@ pub fn snapshot_now(
     sample: Option<&ActivitySample>,
     keep: usize,
 ) -> Result<PathBuf, String> {
-    let mut view = FrameView::default();
-    pipeline.frame_view(&mut view, true);
+    let mut view = FrameOutcome::default();
+    pipeline.frame_outcome(&mut view, true);
     let mut depth = Vec::new();
     let has_depth = pipeline.depth_grid((frame.width, frame.height), snapshot::DEPTH_GRID, &mut depth);
     let name = format!("{}-{:08}", freeze::utc_stamp(std::time::SystemTime::now()), frame.seq);

@@ -6,7 +6,7 @@
 //! colour PNG with its scale (near = red, far = blue, unknown = black). docs/recording.md.
 
 use crate::draw::{self, Placer, Rect};
-use fme_core::pipeline::{ActivitySample, Frame, FrameView};
+use fme_core::pipeline::{ActivitySample, Frame, FrameOutcome};
 use image::{Rgb, RgbImage};
 use std::path::{Path, PathBuf};
 
@@ -56,11 +56,11 @@ fn bar_parts(sample: Option<&ActivitySample>, fish_tracked: usize, caption: &Cap
     let mut parts = Vec::new();
     match sample {
         Some(s) => {
-            let c = if s.flags.depth_uncalibrated { BAD } else { CALIBRATED };
+            let c = if s.flags.unfitted { BAD } else { CALIBRATED };
             parts.push((format!("activity {} m/s ({} BL/s)", num(s.mean.0, 3), num(s.mean_body_lengths, 2)), c));
             parts.push((format!("smoothed {} m/s", num(s.smoothed.0, 3)), c));
             parts.push((format!("{} fish", s.fish), WHITE));
-            if s.flags.depth_uncalibrated {
+            if s.flags.unfitted {
                 parts.push(("depth NOT calibrated".into(), BAD));
             }
             if s.flags.too_few_fish {
@@ -117,7 +117,7 @@ fn top_bar(img: &mut RgbImage, parts: &[(String, Rgb<u8>)], px: f32) -> Rect {
 }
 
 /// The legend's lines: what each mark means (only the marks in the picture).
-fn legend_lines(view: &FrameView) -> Vec<(String, Rgb<u8>)> {
+fn legend_lines(view: &FrameOutcome) -> Vec<(String, Rgb<u8>)> {
     let mut l = Vec::new();
     if !view.tracks.is_empty() {
         l.push(("box: fish track; label: id speed(m/s) depth(m)".into(), WHITE));
@@ -133,7 +133,7 @@ fn legend_lines(view: &FrameView) -> Vec<(String, Rgb<u8>)> {
 }
 
 /// The frame with overlays.
-pub fn overlay(frame: &Frame, view: &FrameView, caption: &Caption) -> Result<RgbImage, String> {
+pub fn overlay(frame: &Frame, view: &FrameOutcome, caption: &Caption) -> Result<RgbImage, String> {
     let mut rgb = Vec::new();
     let (w, h) = frame.to_rgb_into(&mut rgb)?;
     let mut img = RgbImage::from_raw(w, h, rgb).ok_or("decoded frame has the wrong size")?;
@@ -273,7 +273,7 @@ pub fn write(
     dir: &Path,
     name: &str,
     frame: &Frame,
-    view: &FrameView,
+    view: &FrameOutcome,
     caption: &Caption,
     depth: Option<&[f32]>,
     keep: usize,
@@ -320,14 +320,14 @@ mod tests {
             ci95_half: fme_core::units::MetresPerSecond(0.02),
             fish: 22,
             latency: fme_core::units::Seconds(0.5),
-            flags: fme_core::pipeline::QualityFlags { depth_uncalibrated: uncalibrated, ..Default::default() },
+            flags: fme_core::pipeline::QualityFlags { unfitted: uncalibrated, ..Default::default() },
             scale: fme_core::pipeline::ScaleSource::default(),
         }
     }
 
     #[test]
     fn references_marked_with_their_residual() {
-        let mut view = FrameView::default();
+        let mut view = FrameOutcome::default();
         let p = |u, v| fme_core::geometry::Pixel { u, v };
         view.references.extend([(p(100.0, 120.0), 0.02), (p(220.0, 120.0), -0.3)]);
         let img = overlay(&frame(320, 240, 0), &view, &Caption::default()).expect("overlay");
@@ -360,7 +360,7 @@ mod tests {
         assert_eq!(bar_parts(None, 3, &Caption::default())[1].0, "3 fish tracked");
         // Drawn: on a bright frame the bar is dark, with green (calibrated) and white text in it; it
         // wraps to two lines on a narrow frame rather than running off the edge.
-        let img = overlay(&frame(640, 384, 230), &FrameView::default(), &cap).expect("overlay");
+        let img = overlay(&frame(640, 384, 230), &FrameOutcome::default(), &cap).expect("overlay");
         let bar = |img: &RgbImage, y0: u32, y1: u32| {
             let px: Vec<[u8; 3]> = (y0..y1)
                 .flat_map(|y| (0..img.width()).map(move |x| (x, y)))
@@ -374,7 +374,7 @@ mod tests {
         let (green, white, dark, n) = bar(&img, 0, 16);
         assert!(green > 100 && white > 100 && dark > n / 2, "{green} {white} {dark} of {n}");
         assert_eq!(bar(&img, 60, 70).2, 0, "the frame below the bar is untouched");
-        let narrow = overlay(&frame(320, 240, 230), &FrameView::default(), &cap).expect("overlay");
+        let narrow = overlay(&frame(320, 240, 230), &FrameOutcome::default(), &cap).expect("overlay");
         let (_, white2, dark2, n2) = bar(&narrow, 18, 28);
         assert!(white2 > 20 && dark2 > n2 / 2, "second line of the bar: {white2} {dark2} of {n2}");
     }

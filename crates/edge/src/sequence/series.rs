@@ -71,7 +71,7 @@ impl SeriesWriter {
             Field(opt(s.mean_body_lengths)),
             s.latency.0,
             u8::from(s.flags.too_few_fish),
-            u8::from(s.flags.depth_uncalibrated),
+            u8::from(s.flags.unfitted),
             s.scale.name(),
             u8::from(s.flags.unlike_fish)
         )

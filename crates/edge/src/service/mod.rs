@@ -355,7 +355,7 @@ fn pipeline_loop(mut c: PipelineCtx) {
         let mut due = false;
         let ts = frame.timestamp.get();
         let stage = c.pipeline.health();
-        let calib = c.pipeline.calib();
+        let fit_state = c.pipeline.fit_state();
         let sample = match result {
             Ok(s) => {
                 if let (Some(tx), Some(sample)) = (&c.series, s) {
@@ -412,7 +412,7 @@ fn pipeline_loop(mut c: PipelineCtx) {
             h.pipeline_errors = errors;
             h.last_processed_at = Some(now);
             h.stage = stage;
-            h.calib = calib;
+            h.fit_state = fit_state;
             if let Some(s) = sample {
                 h.last_sample = Some(s);
                 h.last_sample_at = Some(now);

@@ -100,7 +100,7 @@ impl Publisher {
         if h.stage.detector_ok {
             bits |= status::DETECTOR_OK;
         }
-        if h.calib.calibrated || h.last_sample.is_some_and(|s| !s.flags.depth_uncalibrated) {
+        if h.fit_state.fitted || h.last_sample.is_some_and(|s| !s.flags.unfitted) {
             bits |= status::DEPTH_CALIBRATED;
         }
         if stale {
@@ -116,7 +116,7 @@ impl Publisher {
         if h.record.disk_fault || h.disk.history_fault || h.disk.stalled_for(now) >= self.disk_stall {
             bits |= status::RECORD_FAULT;
         }
-        if h.calib.source == fme_core::pipeline::ScaleSource::Fish {
+        if h.fit_state.source == fme_core::pipeline::ScaleSource::Fish {
             bits |= status::SCALE_FROM_FISH;
         }
         if h.mqtt.link == crate::status::MqttLink::AuthFailed {
@@ -183,7 +183,7 @@ impl Publisher {
             h.fault = inp.fault;
             h.feeding = inp.feeding;
             h.updates += 1;
-            (inp, h.calib.source)
+            (inp, h.fit_state.source)
         });
         bank.publish(registers::encode(&inp, self.order));
         if self.history.is_some() || self.mqtt.is_some() {

@@ -7,7 +7,7 @@ mod state_dir;
 
 pub use state_dir::state_dir;
 
-use fme_core::pipeline::{ActivitySample, CalibInfo, StageHealth};
+use fme_core::pipeline::{ActivitySample, DepthFitState, StageHealth};
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -109,7 +109,7 @@ pub struct Health {
     /// Stage health.
     pub stage: StageHealth,
     /// Calibration.
-    pub calib: CalibInfo,
+    pub fit_state: DepthFitState,
     /// Current fault.
     pub fault: FaultCode,
     /// Feeding recommended.
@@ -280,7 +280,7 @@ impl Health {
             last_sample_at: None,
             last_processed_at: None,
             stage: StageHealth::default(),
-            calib: CalibInfo::default(),
+            fit_state: DepthFitState::default(),
             fault: FaultCode::None,
             feeding: false,
             latency: LatencyHistogram::default(),

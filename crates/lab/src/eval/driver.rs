@@ -51,7 +51,7 @@ pub struct EvalOptions {
     pub foul_refs: usize,
     /// Seed of the synthetic detections of `--boxes tracker` (when the sequence has no det/det.txt).
     pub det_seed: u64,
-    /// Collect one [`TrackRow`] per fish and frame into [`EvalReport::tracks`] (`--tracks`).
+    /// Collect one [`FishRow`] per fish and frame into [`EvalReport::tracks`] (`--tracks`).
     pub track_rows: bool,
     /// Run without the sequence's calibration (`--no-calibration`): the board default camera, the fish
     /// as the ruler.
@@ -106,7 +106,7 @@ impl ScoredRow {
 /// One tracked fish in one frame, as the estimator saw it (`--tracks`): what separates the speed
 /// error into its lateral part (box motion at the fitted depth) and its along-ray part (depth change).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TrackRow {
+pub struct FishRow {
     /// 1-based frame number.
     pub frame: u32,
     /// Timestamp, seconds.
@@ -243,7 +243,7 @@ pub struct EvalReport {
     pub series: Vec<ScoredRow>,
     /// Per-fish rows (collected with [`EvalOptions::track_rows`], written by `--tracks`).
     #[serde(skip)]
-    pub tracks: Vec<TrackRow>,
+    pub tracks: Vec<FishRow>,
 }
 
 /// MOT metrics of the tracked boxes (MOTChallenge conventions, IoU 0.5).
@@ -523,7 +523,7 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
             }
         }
         if opts.track_rows {
-            tracks.extend(views.iter().map(|v| TrackRow {
+            tracks.extend(views.iter().map(|v| FishRow {
                 frame,
                 t: t.0,
                 id: v.id,
@@ -617,7 +617,7 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         bls_rmse: rmse(&bls_e, &bls_t),
         bls_distcorr: distance_correlation(&bls_e, &bls_t),
         bls_bias: bias(&bls_e, &bls_t),
-        scale_source: pipeline.calib().source.name(),
+        scale_source: pipeline.fit_state().source.name(),
         error_ci95_mps: [quantile(&errors, 0.025).unwrap_or(0.0), quantile(&errors, 0.975).unwrap_or(0.0)],
         speed_bias_mps: bias(&est_v, &truth).unwrap_or(0.0),
         mean_true_mps: truth.iter().sum::<f64>() / n,
@@ -721,7 +721,7 @@ pub fn write_series(path: &Path, series: &[ScoredRow]) -> Result<(), EvalError> 
 
 /// Writes the per-fish rows as CSV with header `frame,t,id,u,v,w,h,depth_raw_m,depth_m,speed_mps`
 /// (empty field where a value is missing).
-pub fn write_tracks(path: &Path, rows: &[TrackRow]) -> Result<(), EvalError> {
+pub fn write_tracks(path: &Path, rows: &[FishRow]) -> Result<(), EvalError> {
     write_csv(path, "frame,t,id,u,v,w,h,depth_raw_m,depth_m,speed_mps", rows, |out, r| {
         writeln!(
             out,

@@ -7,7 +7,7 @@ use super::boxes::IndexedBoxes;
 use super::relative::{RelativeGtParams, relative_at, sample_relative};
 use fme_core::geometry::{Pixel, PixelBox};
 use fme_core::metric::{MapKind, RelativeMap, sample_median};
-use fme_core::pipeline::{DepthView, Frame, Substitute};
+use fme_core::pipeline::{DepthGrid, Frame, Substitute};
 use fme_core::track::Detection;
 use fme_edge::sequence::{DepthMap, Sequence};
 
@@ -47,7 +47,7 @@ struct GtMap {
     fouled: Vec<Pixel>,
 }
 
-impl DepthView for GtMap {
+impl DepthGrid for GtMap {
     fn kind(&self) -> MapKind {
         match self.input {
             DepthInput::Relative(_) => MapKind::InverseDepth,
@@ -139,8 +139,8 @@ impl Substitute for GroundTruth {
         self.map = Some(GtMap { frame: n, map, metres, input: self.depth, fouled: self.fouled.clone() });
         Ok(())
     }
-    fn depth(&self) -> Option<&dyn DepthView> {
-        self.map.as_ref().map(|m| m as &dyn DepthView)
+    fn depth(&self) -> Option<&dyn DepthGrid> {
+        self.map.as_ref().map(|m| m as &dyn DepthGrid)
     }
 }
 

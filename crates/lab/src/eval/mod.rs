@@ -16,7 +16,7 @@ pub mod relative;
 
 pub use boxes::{BoxesChoice, IndexedBoxes};
 pub use driver::{
-    DepthChoice, EvalOptions, EvalReport, MotSummary, ScoredRow, TrackRow, evaluate, write_series, write_tracks,
+    DepthChoice, EvalOptions, EvalReport, FishRow, MotSummary, ScoredRow, evaluate, write_series, write_tracks,
 };
 pub use metrics::{DepthAccuracy, distance_correlation, quantile, rmse};
 pub use relative::RelativeGtParams;
