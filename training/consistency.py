@@ -1,4 +1,4 @@
-"""fme's depth consistency (src/eval/consistency.rs) for training/: per frame, Spearman's rank
+"""fme's depth consistency (crates/lab/src/eval/consistency.rs) for training/: per frame, Spearman's rank
 correlation between the network's relative inverse depth at each fish (3x3 median of the map at
 the box centre) and the box's long side, over boxes inside the frame; the mean over frames with
 at least MIN_BOXES such boxes. Within a cohort a nearer fish looks longer, so +1 is a network that

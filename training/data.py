@@ -1,4 +1,4 @@
-"""Reads fme sequences (MOTChallenge + fme extras, see src/sequence) into compact numpy caches.
+"""Reads fme sequences (MOTChallenge + fme extras, see crates/edge/src/sequence) into compact numpy caches.
 
 Frames are resized to the network size (NET_W x NET_H; 640x384 sequences halve exactly, so the
 Ultralytics letterbox is a plain resize with no padding). Boxes are scaled the same way. Depth
