@@ -7,7 +7,7 @@ mod support;
 
 use fme::capture::{Frame, FrameSource, RecordedSource};
 use fme::output::registers::FaultCode;
-use fme::pipeline::{ActivitySample, Pipeline, PipelineError, StageHealth};
+use fme::pipeline::{FrameOutcome, Pipeline, PipelineError, StageHealth};
 use fme::service::{Daemon, RunOptions};
 use std::os::unix::net::UnixDatagram;
 use std::time::{Duration, Instant};
@@ -19,12 +19,12 @@ struct StuckAfter {
 }
 
 impl Pipeline for StuckAfter {
-    fn process(&mut self, _frame: &Frame) -> Result<Option<ActivitySample>, PipelineError> {
+    fn process(&mut self, _frame: &Frame) -> Result<FrameOutcome<'_>, PipelineError> {
         self.seen += 1;
         if self.seen == self.ok_frames {
             std::thread::sleep(Duration::from_secs(4));
         }
-        Ok(None)
+        Ok(FrameOutcome::sample_only(None, self.health()))
     }
     fn health(&self) -> StageHealth {
         StageHealth { detector_ok: true, depth_ok: true, ..StageHealth::default() }

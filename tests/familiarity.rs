@@ -129,7 +129,7 @@ fn run(seen: Seen) -> (Vec<(f64, bool)>, FishPipeline) {
             format: PixelFormat::Gray8,
             data: vec![0; 640 * 384],
         };
-        let s = p.process(&frame).expect("frame").expect("sample");
+        let s = p.process(&frame).expect("frame").sample.expect("sample");
         out.push((t, s.flags.unlike_fish));
     }
     (out, p)

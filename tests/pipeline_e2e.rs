@@ -5,7 +5,8 @@
 use fme::capture::{Frame, FrameSource, PixelFormat, RecordedSource};
 use fme::config::Config;
 use fme::pipeline::FishPipeline;
-use fme::pipeline::{ActivitySample, Pipeline, PipelineError};
+use fme::motion::Fish;
+use fme::pipeline::{ActivitySample, DepthFitState, Pipeline, PipelineError};
 use fme::sequence::Sequence;
 use fme::units::Seconds;
 use std::path::Path;
@@ -29,8 +30,15 @@ fn frames() -> Vec<Frame> {
     out
 }
 
-fn run(p: &mut FishPipeline, frames: &[Frame]) -> Vec<ActivitySample> {
-    frames.iter().map(|f| p.process(f).expect("frame processed").expect("a sample per frame")).collect()
+/// The samples of `frames`, and the last frame's depth fit and fish.
+fn run(p: &mut FishPipeline, frames: &[Frame]) -> (Vec<ActivitySample>, DepthFitState, Vec<Fish>) {
+    let (mut samples, mut fit, mut fish) = (Vec::new(), DepthFitState::default(), Vec::new());
+    for f in frames {
+        let o = p.process(f).expect("frame processed");
+        samples.push(o.sample.expect("a sample per frame"));
+        (fit, fish) = (o.fit, o.fish.to_vec());
+    }
+    (samples, fit, fish)
 }
 
 /// Mean true swarm speed (mean |v| of the visible fish) over frames `from..=to` (1-based).
@@ -50,12 +58,11 @@ fn bundled_models_on_the_bundled_recording_give_calibrated_plausible_activity() 
     let cal = fme::calibration::load(&Path::new(SEQ).join("meta.json")).expect("calibration");
     let mut p = FishPipeline::new(&config().pipeline(), Some(cal)).expect("pipeline with the bundled models");
     let frames = frames();
-    let samples = run(&mut p, &frames);
+    let (samples, c, tracked) = run(&mut p, &frames);
     let h = p.health();
     assert!(h.detector_ok && h.depth_ok, "{h:?}");
     // Rates on frame time: 10 Hz detection and 5 Hz depth on a 30 fps recording.
     assert!((h.detector_hz - 10.0).abs() < 0.5 && (h.depth_hz - 5.0).abs() < 0.5, "{h:?}");
-    let c = p.fit_state();
     assert!(c.fitted && c.references_visible >= 3, "{c:?}");
     // After the 1 s speed span, the swarm (20 fish, some hidden) is tracked and measured.
     let late = &samples[45..];
@@ -70,7 +77,7 @@ fn bundled_models_on_the_bundled_recording_give_calibrated_plausible_activity() 
     assert!((est - truth).abs() < 0.25 * truth + 0.03, "estimated {est:.3} m/s vs true {truth:.3} m/s");
     assert!(late.iter().all(|s| s.ci95_half.0.is_finite() && s.ci95_half.0 >= 0.0));
     let mut text = String::new();
-    p.describe_tracks(&mut text, 5).expect("describe");
+    fme::console::tracks::describe_fish(&mut text, &tracked, 5);
     assert!(text.lines().count() == 5 && text.contains("depth"), "{text}");
 }
 
@@ -81,9 +88,9 @@ fn without_calibration_fish_are_counted_but_no_speed_is_claimed() {
     let mut cfg = config();
     cfg.depth.scale = fme::metric::DepthScale::References;
     let mut p = FishPipeline::new(&cfg.pipeline(), None).expect("pipeline");
-    let samples = run(&mut p, &frames()[..60]);
+    let (samples, fit, _) = run(&mut p, &frames()[..60]);
     let last = samples.last().expect("samples");
-    assert!(last.flags.unfitted && !p.fit_state().fitted);
+    assert!(last.flags.unfitted && !fit.fitted);
     assert!(last.mean.0.is_nan(), "no speed without metric depth: {last:?}");
     assert!(p.health().tracks >= 5, "fish still tracked: {:?}", p.health());
 }
@@ -93,8 +100,7 @@ fn without_calibration_the_fish_are_the_ruler() {
     // The shipped `depth.scale = "auto"` with no calibration file: the board default camera, and the
     // fish of `motion.body_length_m` as the ruler once they have been seen in 10 depth frames (2 s).
     let mut p = FishPipeline::new(&config().pipeline(), None).expect("pipeline");
-    let samples = run(&mut p, &frames());
-    let c = p.fit_state();
+    let (samples, c, _) = run(&mut p, &frames());
     assert!(c.fitted && c.source == fme::pipeline::ScaleSource::Fish && c.fish_rulers >= 3, "{c:?}");
     let last = samples.last().expect("samples");
     assert!(!last.flags.unfitted && last.mean.0.is_finite(), "{last:?}");
@@ -124,15 +130,16 @@ fn a_bad_frame_is_an_error_and_the_next_one_is_fine() {
 fn time_going_backwards_restarts_tracking_without_error() {
     let mut p = FishPipeline::new(&config().pipeline(), None).expect("pipeline");
     let frames = frames();
-    let before = run(&mut p, &frames[..30]);
-    assert!(p.health().tracks > 0 && p.tracks().count() > 0);
+    let (before, _, fish) = run(&mut p, &frames[..30]);
+    assert!(p.health().tracks > 0 && !fish.is_empty());
     assert!(before.last().is_some_and(|s| s.fish == 0), "uncalibrated: fish tracked, none with a speed");
     // The camera restarts: timestamps start again from zero. The old tracks must be gone at once
     // (a track needs two detections to be confirmed again), and tracking resumes.
-    let first = p.process(&frames[0]).expect("frame after the restart").expect("a sample");
+    let o = p.process(&frames[0]).expect("frame after the restart");
+    let (first, fish) = (o.sample.expect("a sample"), o.fish.len());
     assert_eq!(first.timestamp, Seconds(0.0));
+    assert_eq!(fish, 0, "estimator reset");
     assert_eq!(p.health().tracks, 0, "tracks reset: {:?}", p.health());
-    assert_eq!(p.tracks().count(), 0, "estimator reset");
     run(&mut p, &frames[1..10]);
     assert!(p.health().tracks > 0, "tracking resumes after the restart: {:?}", p.health());
     let mut nan = frames[10].clone();

@@ -49,13 +49,18 @@ pub fn run(args: SnapshotArgs) -> anyhow::Result<()> {
     let mut pipeline = crate::service::build_pipeline(&cfg).map_err(|e| UsageError(e.to_string()))?;
     let mut last = None;
     let mut buf = Vec::new();
+    let mut overlays = crate::record::Overlays::default();
     for _ in 0..args.frames {
         match source.next_frame(std::mem::take(&mut buf)) {
             Ok(frame) => {
                 let sample = match pipeline.process(&frame) {
-                    Ok(s) => s,
+                    Ok(o) => {
+                        overlays.copy_from(&o);
+                        o.sample
+                    }
                     Err(e) => {
                         tracing::warn!("frame {}: {e}", frame.seq);
+                        overlays.clear();
                         None
                     }
                 };
@@ -74,6 +79,7 @@ pub fn run(args: SnapshotArgs) -> anyhow::Result<()> {
         &dir,
         &cfg.source.path,
         &frame,
+        &overlays,
         &*pipeline,
         sample.as_ref(),
         cfg.record.keep_snapshots,

@@ -78,7 +78,7 @@ fn partials(recordings: &Path) -> Vec<String> {
 }
 
 fn entry(seq: u64) -> RingEntry {
-    RingEntry { seq, t: seq as f64 / 30.0, size: (64, 48), bytes: 0, view: Default::default(), sample: None }
+    RingEntry { seq, t: seq as f64 / 30.0, size: (64, 48), bytes: 0, overlays: Default::default(), sample: None }
 }
 
 /// A freeze that fails for want of space removes its staged folder: its hard links would pin the

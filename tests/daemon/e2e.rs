@@ -146,12 +146,12 @@ impl fme::pipeline::Pipeline for PanicsSometimes {
     fn process(
         &mut self,
         frame: &fme::capture::Frame,
-    ) -> Result<Option<fme::pipeline::ActivitySample>, fme::pipeline::PipelineError> {
+    ) -> Result<fme::pipeline::FrameOutcome<'_>, fme::pipeline::PipelineError> {
         self.0 += 1;
         if self.0.is_multiple_of(3) {
             panic!("corrupt frame {}", frame.seq);
         }
-        Ok(None)
+        Ok(fme::pipeline::FrameOutcome::sample_only(None, self.health()))
     }
     fn health(&self) -> fme::pipeline::StageHealth {
         fme::pipeline::StageHealth::default()

@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use fme::config::{Config, ModbusMode};
-use fme::pipeline::{ActivitySample, Frame, Pipeline, PipelineError, QualityFlags, StageHealth};
+use fme::pipeline::{ActivitySample, Frame, FrameOutcome, Pipeline, PipelineError, QualityFlags, StageHealth};
 use fme::units::{MetresPerSecond, Seconds};
 use std::path::Path;
 
@@ -110,7 +110,19 @@ impl FrameDiffPipeline {
 }
 
 impl Pipeline for FrameDiffPipeline {
-    fn process(&mut self, frame: &Frame) -> Result<Option<ActivitySample>, PipelineError> {
+    fn process(&mut self, frame: &Frame) -> Result<FrameOutcome<'_>, PipelineError> {
+        let sample = self.sample(frame)?;
+        Ok(FrameOutcome::sample_only(sample, self.health()))
+    }
+
+    fn health(&self) -> StageHealth {
+        // No depth stage here, so nothing to fail: depth_ok follows frame decoding like detector_ok.
+        StageHealth { detector_ok: self.ok, depth_ok: self.ok, ..StageHealth::default() }
+    }
+}
+
+impl FrameDiffPipeline {
+    fn sample(&mut self, frame: &Frame) -> Result<Option<ActivitySample>, PipelineError> {
         let mut cur = std::mem::take(&mut self.cur);
         let r = self.sample_grid(frame, &mut cur);
         self.cur = cur;
@@ -151,11 +163,6 @@ impl Pipeline for FrameDiffPipeline {
             flags: QualityFlags { too_few_fish: true, unfitted: true, stale: false, unlike_fish: false },
             scale: fme::pipeline::ScaleSource::None,
         }))
-    }
-
-    fn health(&self) -> StageHealth {
-        // No depth stage here, so nothing to fail: depth_ok follows frame decoding like detector_ok.
-        StageHealth { detector_ok: self.ok, depth_ok: self.ok, ..StageHealth::default() }
     }
 }
 

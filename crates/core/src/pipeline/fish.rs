@@ -18,17 +18,17 @@ use super::rate::RateMeter;
 use super::substitute::{DepthGrid, Substitute};
 use super::{
     ActivitySample, Calibration, DepthFitState, Frame, FrameOutcome, Pipeline, PipelineError, QualityFlags,
-    ScaleSource, StageHealth, TrackRecord,
+    ScaleSource, StageHealth,
 };
 use crate::familiarity::FamiliarityMonitor;
 use crate::geometry::{Camera, PixelBox};
-use crate::infer::{self, DepthNet, Detector, FramePlan, InferSchedule, RgbFrame};
+use crate::infer::{self, DepthNet, Detector, InferSchedule, RgbFrame};
 use crate::metric::{
     AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, DepthFit, DepthScale, FitSmoother, LengthLearner, MapKind, ROBUST_INLIER,
     ReferenceFootprints, ReferencePoints, References, Rulers, fit_rulers, sample_fish,
 };
 use crate::motion::heading::apparent_length;
-use crate::motion::{ActivityEstimator, Fish, Observation, SwarmEstimate};
+use crate::motion::{ActivityEstimator, Fish, Observation};
 use crate::track::{self, Tracker};
 use crate::units::{Metres, MetresPerSecond};
 
@@ -75,8 +75,8 @@ pub struct FishPipeline {
     dets: Vec<track::Detection>,
     given: Vec<(u32, PixelBox)>,
     obs: Vec<Observation>,
-    ran: FramePlan,
-    estimate: SwarmEstimate,
+    /// The estimator's fish after the last frame, for its outcome (allocated once).
+    fish: Vec<Fish>,
     last_t: Option<f64>,
     health: StageHealth,
     det_rate: RateMeter,
@@ -183,55 +183,13 @@ impl FishPipeline {
             dets: Vec::with_capacity(track::MAX_DETS),
             given: Vec::with_capacity(track::MAX_TRACKS),
             obs: Vec::with_capacity(track::MAX_TRACKS),
-            ran: FramePlan::default(),
-            estimate: SwarmEstimate::default(),
+            fish: Vec::with_capacity(crate::motion::MAX_FISH),
             last_t: None,
             health: StageHealth::default(),
             det_rate: RateMeter::default(),
             depth_rate: RateMeter::default(),
             cfg: cfg.clone(),
         })
-    }
-
-    /// What ran on the last frame (detector, depth).
-    pub fn ran(&self) -> FramePlan {
-        self.ran
-    }
-
-    /// The detections of the last detector run (after dropping those on the reference cubes).
-    pub fn detections(&self) -> &[track::Detection] {
-        &self.dets
-    }
-
-    /// The tracked boxes that entered the estimator on the last frame.
-    pub fn observations(&self) -> &[Observation] {
-        &self.obs
-    }
-
-    /// The depth network's last relative inverse-depth map (none when the network does not run:
-    /// ground-truth depth, or before its first frame).
-    pub fn depth_map(&self) -> Option<&infer::RelDepthMap> {
-        self.depth.as_ref().and_then(DepthNet::last_map)
-    }
-
-    /// The estimator's result on the last frame (corrections, latency, ...).
-    pub fn estimate(&self) -> &SwarmEstimate {
-        &self.estimate
-    }
-
-    /// The estimator's tracks after the last frame.
-    pub fn tracks(&self) -> impl Iterator<Item = Fish> + '_ {
-        self.estimator.tracks()
-    }
-
-    /// Counts of the metric fits so far.
-    pub fn fit_stats(&self) -> FitStats {
-        self.fit_stats
-    }
-
-    /// The reference objects inside the image.
-    pub fn references_in_view(&self) -> usize {
-        self.refs.len()
     }
 
     /// Takes the first `n` reference objects out of the fit from now on, as if fouled over or out of
@@ -502,7 +460,7 @@ fn fallback_camera(cfg: &PipelineConfig) -> Camera {
 }
 
 impl Pipeline for FishPipeline {
-    fn process(&mut self, frame: &Frame) -> Result<Option<ActivitySample>, PipelineError> {
+    fn process(&mut self, frame: &Frame) -> Result<FrameOutcome<'_>, PipelineError> {
         let t = frame.timestamp;
         if !t.0.is_finite() {
             return Err(PipelineError::Decode { seq: frame.seq, message: format!("timestamp {} is not finite", t.0) });
@@ -513,7 +471,6 @@ impl Pipeline for FishPipeline {
         }
         self.last_t = Some(t.0);
         let plan = self.schedule.plan(t);
-        self.ran = plan;
         let tracks_given = self.substitute.as_ref().is_some_and(|s| s.replaces_tracks());
         if !tracks_given {
             self.tracker.predict(t).map_err(|e| PipelineError::Stage { stage: "tracker", message: e.to_string() })?;
@@ -576,7 +533,6 @@ impl Pipeline for FishPipeline {
                 MapKind::InverseDepth => fit?.depth(r),
             }
         });
-        self.estimate = s;
         let metric = self.fit.is_some() || view.is_some_and(|v| v.kind() == MapKind::Depth);
         let mean = s.mean.map_or(f64::NAN, |m| m.0);
         let ci95_half = s.ci95.map_or(f64::NAN, |(lo, hi)| 0.5 * (hi.0 - lo.0));
@@ -584,7 +540,7 @@ impl Pipeline for FishPipeline {
             Some(l) => mean / l.0,
             None => s.mean_bls.unwrap_or(f64::NAN),
         };
-        Ok(Some(ActivitySample {
+        let sample = ActivitySample {
             timestamp: t,
             mean: MetresPerSecond(mean),
             mean_body_lengths: bls,
@@ -599,37 +555,35 @@ impl Pipeline for FishPipeline {
                 unlike_fish: self.familiarity.unlike_fish(),
             },
             scale: self.fit_state.source,
-        }))
+        };
+        self.fish.clear();
+        self.fish.extend(self.estimator.tracks());
+        Ok(FrameOutcome {
+            t,
+            plan,
+            detections: if plan.detect { &self.dets } else { &[] },
+            observations: &self.obs,
+            fish: &self.fish,
+            estimate: s,
+            sample: Some(sample),
+            fit: self.fit_state,
+            fit_stats: self.fit_stats,
+            references_in_view: self.refs.len(),
+            health: self.health,
+            depth_map: if plan.depth { self.depth.as_ref().and_then(DepthNet::last_map) } else { None },
+        })
     }
 
     fn health(&self) -> StageHealth {
         self.health
     }
 
-    fn fit_state(&self) -> DepthFitState {
-        self.fit_state
-    }
-
-    fn frame_outcome(&self, out: &mut FrameOutcome, references: bool) {
+    fn reference_residuals(&self, out: &mut Vec<(crate::geometry::Pixel, f64)>) {
         out.clear();
-        out.detected = self.ran.detect;
-        if self.ran.detect {
-            out.detections.extend(self.dets.iter().map(|d| (d.bbox, d.score)));
-        }
-        let t = self.last_t.unwrap_or(f64::NAN);
-        out.tracks.extend(self.estimator.tracks().filter(|v| v.last_seen.0 == t).map(|v| TrackRecord {
-            id: v.id,
-            bbox: v.bbox,
-            depth_m: v.depth.map_or(f64::NAN, |d| d.0),
-            speed_mps: v.speed.map_or(f64::NAN, |s| s.0),
-        }));
-        if !references {
-            return;
-        }
         // Each reference with the fit's residual there (eq. 1-2): which one was measured wrong or
         // is fouled shows at a glance.
         let (view, fit) = (self.depth_view(), self.fit.as_ref());
-        out.references.extend(self.refs.iter().map(|(px, depth)| {
+        out.extend(self.refs.iter().map(|(px, depth)| {
             let fitted = match view {
                 Some(v) if v.kind() == MapKind::Depth => v.point(px).map(Metres),
                 Some(v) => v.point(px).and_then(|r| fit?.depth(r)),
@@ -658,25 +612,5 @@ impl Pipeline for FishPipeline {
             }
         }
         true
-    }
-
-    fn describe_tracks(&self, out: &mut dyn std::fmt::Write, max: usize) -> std::fmt::Result {
-        for v in self.estimator.tracks().take(max) {
-            let c = v.bbox.center();
-            write!(
-                out,
-                "id {:>4} t {:.2} s box ({:.0},{:.0}) {:.0}x{:.0} px",
-                v.id, v.last_seen.0, c.u, c.v, v.bbox.w, v.bbox.h
-            )?;
-            match v.depth {
-                Some(d) => write!(out, " depth {:.2} m", d.0)?,
-                None => write!(out, " depth -")?,
-            }
-            match v.speed {
-                Some(s) => writeln!(out, " speed {:.3} m/s", s.0)?,
-                None => writeln!(out, " speed -")?,
-            }
-        }
-        Ok(())
     }
 }

@@ -15,6 +15,7 @@ mod calibration;
 mod config;
 mod fish;
 mod frame;
+mod outcome;
 mod rate;
 mod substitute;
 
@@ -23,6 +24,7 @@ pub use config::PipelineConfig;
 
 pub use fish::{FishPipeline, FitStats};
 pub use frame::{Frame, PixelFormat};
+pub use outcome::FrameOutcome;
 pub use substitute::{DepthGrid, Substitute};
 
 use crate::units::{MetresPerSecond, Seconds};
@@ -138,68 +140,22 @@ impl ScaleSource {
 
 /// A pipeline: owns all per-frame state; called on the pipeline thread only.
 pub trait Pipeline: Send {
-    /// Processes one frame. Returns a sample when one is due (the pipeline decides its own detection
+    /// Processes one frame and returns what it produced (the pipeline decides its own detection
     /// and depth schedule from frame timestamps; the service rate-limits what reaches the outputs).
     /// An `Err` is a bad frame or a stage failure: the service logs it, raises a status bit and goes on.
-    fn process(&mut self, frame: &Frame) -> Result<Option<ActivitySample>, PipelineError>;
-    /// Current stage health.
+    fn process(&mut self, frame: &Frame) -> Result<FrameOutcome<'_>, PipelineError>;
+    /// Current stage health (also after a frame that failed).
     fn health(&self) -> StageHealth;
-    /// Current calibration.
-    fn fit_state(&self) -> DepthFitState {
-        DepthFitState::default()
-    }
-    /// Writes one line per confirmed track (console `tracks`), at most `max` lines.
-    fn describe_tracks(&self, _out: &mut dyn std::fmt::Write, _max: usize) -> std::fmt::Result {
-        Ok(())
-    }
-    /// Fills `out` with what the last frame produced (the black box and snapshots,
-    /// docs/recording.md): detections and tracks; the references only with `references` (they cost
-    /// a depth reading each, so only snapshots ask for them). The default: nothing.
-    fn frame_outcome(&self, out: &mut FrameOutcome, references: bool) {
-        let _ = references;
+    /// Each reference object in view: its pixel and the depth fit's residual there (fitted minus
+    /// known depth, m; NaN without a fit or a depth reading), into `out`. A depth reading each, so
+    /// only snapshots ask. The default: none.
+    fn reference_residuals(&self, out: &mut Vec<(crate::geometry::Pixel, f64)>) {
         out.clear();
     }
     /// Metric depth (m, NaN where unknown) on a `cols` x `rows` grid of cell centres over a
     /// `width` x `height` image, row-major into `out`; false when there is no metric depth yet.
     fn depth_grid(&self, _size: (u32, u32), _grid: (u32, u32), _out: &mut Vec<f32>) -> bool {
         false
-    }
-}
-
-/// One tracked fish on a frame, for the black box and snapshots.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TrackRecord {
-    /// Track id.
-    pub id: u32,
-    /// Corrected box, px.
-    pub bbox: crate::geometry::PixelBox,
-    /// Corrected depth, m (NaN when unknown).
-    pub depth_m: f64,
-    /// 3D speed, m/s (NaN when unknown).
-    pub speed_mps: f64,
-}
-
-/// What one frame produced: the detections (when the detector ran on it) and the tracked fish.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct FrameOutcome {
-    /// The detector ran on this frame.
-    pub detected: bool,
-    /// Its detections: box and score.
-    pub detections: Vec<(crate::geometry::PixelBox, f64)>,
-    /// The fish tracked on this frame.
-    pub tracks: Vec<TrackRecord>,
-    /// The reference objects in view: their pixel, and the last metric fit's residual there
-    /// (fitted minus known depth, m; NaN when there is no fit or no depth reading).
-    pub references: Vec<(crate::geometry::Pixel, f64)>,
-}
-
-impl FrameOutcome {
-    /// Empties the view, keeping its capacity.
-    pub fn clear(&mut self) {
-        self.detected = false;
-        self.detections.clear();
-        self.tracks.clear();
-        self.references.clear();
     }
 }
 

@@ -102,10 +102,10 @@ fn stage_and_rename(
         if std::fs::hard_link(&src, &dst).is_err() {
             std::fs::copy(&src, &dst).map_err(|e| io(&dst, e))?;
         }
-        for (b, score) in &e.view.detections {
+        for (b, score) in &e.overlays.detections {
             let _ = writeln!(det, "{k},-1,{:.2},{:.2},{:.2},{:.2},{score:.4},-1,-1,-1", b.x, b.y, b.w, b.h);
         }
-        for t in &e.view.tracks {
+        for t in &e.overlays.fish {
             let b = t.bbox;
             let _ = writeln!(tracks, "{k},{},{:.2},{:.2},{:.2},{:.2},1,-1,-1,-1", t.id, b.x, b.y, b.w, b.h);
         }

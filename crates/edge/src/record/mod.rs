@@ -16,13 +16,15 @@
 //! the activity index keeps flowing to the outputs.
 
 pub mod freeze;
+mod overlays;
 pub mod ring;
 pub mod snapshot;
 
 use crate::config::Config;
 use crate::status::Shared;
-use fme_core::pipeline::{ActivitySample, Frame, FrameOutcome, Pipeline, PixelFormat, StageHealth};
+use fme_core::pipeline::{ActivitySample, Frame, Pipeline, PixelFormat, StageHealth};
 use freeze::FreezeInputs;
+pub use overlays::Overlays;
 use ring::{Ring, RingEntry};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -36,8 +38,8 @@ use tracing::Level;
 pub struct FrameRecord {
     /// The frame (bytes as received).
     pub frame: Option<Frame>,
-    /// What the pipeline produced on it.
-    pub view: FrameOutcome,
+    /// What the pipeline produced on it, as drawn.
+    pub overlays: Overlays,
     /// Its activity sample.
     pub sample: Option<ActivitySample>,
     /// Write it to the ring.
@@ -194,7 +196,7 @@ impl Writer {
                     t: frame.timestamp.get(),
                     size: (frame.width, frame.height),
                     bytes: 0,
-                    view: r.view.clone(),
+                    overlays: r.overlays.clone(),
                     sample: r.sample,
                 };
                 let result = match self.ring.as_mut() {
@@ -226,7 +228,7 @@ impl Writer {
             let dir = self.dir.join("snapshots");
             let _busy = InFlight::new(&self.shared);
             let caption = snapshot::Caption::now(&self.source, r.sample.as_ref());
-            match snapshot::write(&dir, &name, frame, &r.view, &caption, depth, self.keep_snapshots) {
+            match snapshot::write(&dir, &name, frame, &r.overlays, &caption, depth, self.keep_snapshots) {
                 Ok(p) => {
                     self.recovered();
                     self.shared.with_health(|h| {
@@ -360,9 +362,16 @@ impl Recorder {
     }
 
     /// Called by the pipeline thread after each frame: hands the frame, what the pipeline made of it
-    /// and its sample to the writer (never waits: a full queue drops the frame and counts it), and
-    /// serves snapshot requests (console `snap`, `record.snapshot_every_s` on frame time).
-    pub fn after_frame(&mut self, frame: &Frame, pipeline: &dyn Pipeline, sample: Option<ActivitySample>) {
+    /// (`overlays`, copied from its outcome) and its sample to the writer (never waits: a full queue
+    /// drops the frame and counts it), and serves snapshot requests (console `snap`,
+    /// `record.snapshot_every_s` on frame time), for which `pipeline` gives the references and depth.
+    pub fn after_frame(
+        &mut self,
+        frame: &Frame,
+        overlays: &Overlays,
+        pipeline: &dyn Pipeline,
+        sample: Option<ActivitySample>,
+    ) {
         let t = frame.timestamp.get();
         let mut snap = self.shared.requests.take_snapshot();
         if self.snapshot_every_s > 0.0 {
@@ -387,7 +396,10 @@ impl Recorder {
             }
             None => r.frame = Some(frame.clone()),
         }
-        pipeline.frame_outcome(&mut r.view, snap);
+        r.overlays.clone_from(overlays);
+        if snap {
+            pipeline.reference_residuals(&mut r.overlays.references);
+        }
         r.sample = sample;
         r.ring = ring;
         r.snapshot = snap;
@@ -463,22 +475,23 @@ impl Recorder {
     }
 }
 
-/// Writes one snapshot now (`fme snapshot`): the frame with `pipeline`'s results on it and its
-/// metric depth map into `dir`, keeping `keep`; the top bar names the camera of `source`. Returns
-/// the JPEG's path.
+/// Writes one snapshot now (`fme snapshot`): the frame with what `pipeline` produced on it
+/// (`overlays`, the references added) and its metric depth map into `dir`, keeping `keep`; the top
+/// bar names the camera of `source`. Returns the JPEG's path.
 pub fn snapshot_now(
     dir: &Path,
     source: &Path,
     frame: &Frame,
+    overlays: &Overlays,
     pipeline: &dyn Pipeline,
     sample: Option<&ActivitySample>,
     keep: usize,
 ) -> Result<PathBuf, String> {
-    let mut view = FrameOutcome::default();
-    pipeline.frame_outcome(&mut view, true);
+    let mut overlays_now = overlays.clone();
+    pipeline.reference_residuals(&mut overlays_now.references);
     let mut depth = Vec::new();
     let has_depth = pipeline.depth_grid((frame.width, frame.height), snapshot::DEPTH_GRID, &mut depth);
     let name = format!("{}-{:08}", freeze::utc_stamp(std::time::SystemTime::now()), frame.seq);
     let caption = snapshot::Caption::now(source, sample);
-    snapshot::write(dir, &name, frame, &view, &caption, has_depth.then_some(depth.as_slice()), keep)
+    snapshot::write(dir, &name, frame, &overlays_now, &caption, has_depth.then_some(depth.as_slice()), keep)
 }

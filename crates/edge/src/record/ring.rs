@@ -3,7 +3,8 @@
 //! and leaves `record.reserve_mb` free on its file system for the history, snapshots and
 //! recordings. The per-frame rows (detections, tracks, sample) are small and kept in memory beside it.
 
-use fme_core::pipeline::{ActivitySample, FrameOutcome};
+use super::Overlays;
+use fme_core::pipeline::ActivitySample;
 use std::collections::VecDeque;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -59,7 +60,7 @@ pub struct RingEntry {
     /// Bytes of the JPEG file.
     pub bytes: u64,
     /// What the pipeline produced on it.
-    pub view: FrameOutcome,
+    pub overlays: Overlays,
     /// The activity sample computed on it.
     pub sample: Option<ActivitySample>,
 }
@@ -221,7 +222,7 @@ mod tests {
     use super::*;
 
     fn entry(seq: u64, t: f64) -> RingEntry {
-        RingEntry { seq, t, size: (4, 4), bytes: 0, view: FrameOutcome::default(), sample: None }
+        RingEntry { seq, t, size: (4, 4), bytes: 0, overlays: Overlays::default(), sample: None }
     }
 
     fn files(dir: &Path) -> usize {

@@ -6,7 +6,8 @@
 //! colour PNG with its scale (near = red, far = blue, unknown = black). docs/recording.md.
 
 use crate::draw::{self, Placer, Rect};
-use fme_core::pipeline::{ActivitySample, Frame, FrameOutcome};
+use super::Overlays;
+use fme_core::pipeline::{ActivitySample, Frame};
 use image::{Rgb, RgbImage};
 use std::path::{Path, PathBuf};
 
@@ -117,15 +118,15 @@ fn top_bar(img: &mut RgbImage, parts: &[(String, Rgb<u8>)], px: f32) -> Rect {
 }
 
 /// The legend's lines: what each mark means (only the marks in the picture).
-fn legend_lines(view: &FrameOutcome) -> Vec<(String, Rgb<u8>)> {
+fn legend_lines(overlays: &Overlays) -> Vec<(String, Rgb<u8>)> {
     let mut l = Vec::new();
-    if !view.tracks.is_empty() {
+    if !overlays.fish.is_empty() {
         l.push(("box: fish track; label: id speed(m/s) depth(m)".into(), WHITE));
     }
-    if !view.detections.is_empty() {
+    if !overlays.detections.is_empty() {
         l.push(("grey box: detection".into(), GREY));
     }
-    if !view.references.is_empty() {
+    if !overlays.references.is_empty() {
         l.push(("+ reference: depth fit error in cm".into(), GOOD));
         l.push((format!("  (yellow ok, red over {:.0} cm)", RESIDUAL_WARN_M * 100.0), BAD));
     }
@@ -133,14 +134,14 @@ fn legend_lines(view: &FrameOutcome) -> Vec<(String, Rgb<u8>)> {
 }
 
 /// The frame with overlays.
-pub fn overlay(frame: &Frame, view: &FrameOutcome, caption: &Caption) -> Result<RgbImage, String> {
+pub fn overlay(frame: &Frame, overlays: &Overlays, caption: &Caption) -> Result<RgbImage, String> {
     let mut rgb = Vec::new();
     let (w, h) = frame.to_rgb_into(&mut rgb)?;
     let mut img = RgbImage::from_raw(w, h, rgb).ok_or("decoded frame has the wrong size")?;
     let px = font_px(h);
     let small = (px * 0.9).max(10.0);
     let pbox = |b: fme_core::geometry::PixelBox| Rect::new(b.x as i64, b.y as i64, b.w as i64, b.h as i64);
-    for (b, _) in &view.detections {
+    for (b, _) in &overlays.detections {
         let r = pbox(*b);
         for x in r.x..=r.x + r.w {
             draw::put(&mut img, x, r.y, GREY);
@@ -151,16 +152,16 @@ pub fn overlay(frame: &Frame, view: &FrameOutcome, caption: &Caption) -> Result<
             draw::put(&mut img, r.x + r.w, y, GREY);
         }
     }
-    for t in &view.tracks {
+    for t in &overlays.fish {
         draw::outlined_rect(&mut img, pbox(t.bbox), draw::id_colour(t.id), 2);
     }
-    let bar = top_bar(&mut img, &bar_parts(caption.sample.as_ref(), view.tracks.len(), caption), px);
+    let bar = top_bar(&mut img, &bar_parts(caption.sample.as_ref(), overlays.fish.len(), caption), px);
     let mut placer = Placer::new(Rect::new(0, 0, i64::from(w), i64::from(h)));
     placer.block(bar);
     // The legend, bottom left, with a line kept for the count of hidden labels.
-    let mut legend = legend_lines(view);
+    let mut legend = legend_lines(overlays);
     let lh = draw::text_size("0", small).1 + 1;
-    let hidden_slot = !view.tracks.is_empty() || !view.references.is_empty();
+    let hidden_slot = !overlays.fish.is_empty() || !overlays.references.is_empty();
     let rows = legend.len() as i64 + i64::from(hidden_slot);
     let lw = legend
         .iter()
@@ -172,27 +173,32 @@ pub fn overlay(frame: &Frame, view: &FrameOutcome, caption: &Caption) -> Result<
     if rows > 0 {
         placer.block(legend_box);
     }
-    let marks: Vec<Rect> = view
-        .tracks
+    let marks: Vec<Rect> = overlays
+        .fish
         .iter()
         .map(|t| pbox(t.bbox))
-        .chain(view.references.iter().map(|(p, _)| Rect::new(p.u as i64 - 5, p.v as i64 - 5, 11, 11)))
+        .chain(overlays.references.iter().map(|(p, _)| Rect::new(p.u as i64 - 5, p.v as i64 - 5, 11, 11)))
         .collect();
     // Labels are drawn after every mark, so no mark covers one.
     let mut labels: Vec<(Rect, String, Rgb<u8>)> = Vec::new();
     // A label never covers a reference's cross (it may cover a fish: the box stays visible).
-    for r in &marks[view.tracks.len()..] {
+    for r in &marks[overlays.fish.len()..] {
         placer.block(*r);
     }
-    for t in &view.tracks {
-        let label = format!("{} {}m/s {}m", t.id, num(t.speed_mps, 2), num(t.depth_m, 1));
+    for t in &overlays.fish {
+        let label = format!(
+            "{} {}m/s {}m",
+            t.id,
+            num(t.speed.map_or(f64::NAN, |s| s.0), 2),
+            num(t.depth.map_or(f64::NAN, |d| d.0), 1)
+        );
         let (tw, th) = draw::text_size(&label, small);
         if let Some(r) = placer.place(&draw::place::candidates(pbox(t.bbox), tw, th, 3), &marks) {
             labels.push((r, label, draw::id_colour(t.id)));
         }
     }
     // Reference objects: a cross, and the fit's residual there in cm (fitted minus known depth).
-    for &(p, residual) in &view.references {
+    for &(p, residual) in &overlays.references {
         let c = if residual.abs() > RESIDUAL_WARN_M { BAD } else { GOOD };
         let (x, y) = (p.u as i64, p.v as i64);
         draw::cross(&mut img, x, y, 5, c);
@@ -273,13 +279,13 @@ pub fn write(
     dir: &Path,
     name: &str,
     frame: &Frame,
-    view: &FrameOutcome,
+    overlays: &Overlays,
     caption: &Caption,
     depth: Option<&[f32]>,
     keep: usize,
 ) -> Result<PathBuf, String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let img = overlay(frame, view, caption).map_err(|e| format!("frame {}: {e}", frame.seq))?;
+    let img = overlay(frame, overlays, caption).map_err(|e| format!("frame {}: {e}", frame.seq))?;
     let jpg = dir.join(format!("{name}.jpg"));
     let bytes = crate::sequence::encode_jpeg(&img, 90).map_err(|e| format!("{}: {e}", jpg.display()))?;
     std::fs::write(&jpg, bytes).map_err(|e| format!("{}: {e}", jpg.display()))?;
@@ -327,10 +333,10 @@ mod tests {
 
     #[test]
     fn references_marked_with_their_residual() {
-        let mut view = FrameOutcome::default();
+        let mut overlays = Overlays::default();
         let p = |u, v| fme_core::geometry::Pixel { u, v };
-        view.references.extend([(p(100.0, 120.0), 0.02), (p(220.0, 120.0), -0.3)]);
-        let img = overlay(&frame(320, 240, 0), &view, &Caption::default()).expect("overlay");
+        overlays.references.extend([(p(100.0, 120.0), 0.02), (p(220.0, 120.0), -0.3)]);
+        let img = overlay(&frame(320, 240, 0), &overlays, &Caption::default()).expect("overlay");
         assert_eq!(img.get_pixel(100, 120).0, [255, 220, 0], "a good reference is yellow");
         assert_eq!(img.get_pixel(220, 116).0, [255, 64, 64], "a reference 30 cm off is red");
         // The legend (bottom left) explains the marks: text pixels in the reference colour there.
@@ -360,7 +366,7 @@ mod tests {
         assert_eq!(bar_parts(None, 3, &Caption::default())[1].0, "3 fish tracked");
         // Drawn: on a bright frame the bar is dark, with green (calibrated) and white text in it; it
         // wraps to two lines on a narrow frame rather than running off the edge.
-        let img = overlay(&frame(640, 384, 230), &FrameOutcome::default(), &cap).expect("overlay");
+        let img = overlay(&frame(640, 384, 230), &Overlays::default(), &cap).expect("overlay");
         let bar = |img: &RgbImage, y0: u32, y1: u32| {
             let px: Vec<[u8; 3]> = (y0..y1)
                 .flat_map(|y| (0..img.width()).map(move |x| (x, y)))
@@ -374,7 +380,7 @@ mod tests {
         let (green, white, dark, n) = bar(&img, 0, 16);
         assert!(green > 100 && white > 100 && dark > n / 2, "{green} {white} {dark} of {n}");
         assert_eq!(bar(&img, 60, 70).2, 0, "the frame below the bar is untouched");
-        let narrow = overlay(&frame(320, 240, 230), &FrameOutcome::default(), &cap).expect("overlay");
+        let narrow = overlay(&frame(320, 240, 230), &Overlays::default(), &cap).expect("overlay");
         let (_, white2, dark2, n2) = bar(&narrow, 18, 28);
         assert!(white2 > 20 && dark2 > n2 / 2, "second line of the bar: {white2} {dark2} of {n2}");
     }

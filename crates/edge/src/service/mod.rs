@@ -329,6 +329,10 @@ fn pipeline_loop(mut c: PipelineCtx) {
     let mut processed = 0u64;
     let mut errors = 0u64;
     let mut tracks = String::with_capacity(1024);
+    // Copies of the last outcome's fish (console `tracks`) and overlays (the recorder), allocated once.
+    let mut fish = Vec::with_capacity(fme_core::motion::MAX_FISH);
+    let mut overlays = crate::record::Overlays::default();
+    let mut fit_state = fme_core::pipeline::DepthFitState::default();
     while !c.shared.stopping() {
         if let Some(wd) = c.watchdog
             && last_ping.is_none_or(|t| t.elapsed() >= wd / 2)
@@ -345,8 +349,19 @@ fn pipeline_loop(mut c: PipelineCtx) {
             }
             continue;
         };
-        // A panic in a stage on one bad frame must not end the pipeline: count it as an error.
-        let result = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| c.pipeline.process(&frame))) {
+        // A panic in a stage on one bad frame must not end the pipeline: count it as an error. The
+        // outcome borrows the pipeline: what the loop keeps of it is copied out here.
+        let (fish, overlays, record) = (&mut fish, &mut overlays, c.recorder.is_some());
+        let result = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            c.pipeline.process(&frame).map(|o| {
+                fish.clear();
+                fish.extend_from_slice(o.fish);
+                if record {
+                    overlays.copy_from(&o);
+                }
+                (o.sample, o.fit)
+            })
+        })) {
             Ok(r) => r,
             Err(p) => Err(fme_core::pipeline::PipelineError::Stage { stage: "pipeline", message: panic_text(&*p) }),
         };
@@ -355,8 +370,11 @@ fn pipeline_loop(mut c: PipelineCtx) {
         let mut due = false;
         let ts = frame.timestamp.get();
         let stage = c.pipeline.health();
-        let fit_state = c.pipeline.fit_state();
-        let sample = match result {
+        match &result {
+            Ok((_, fit)) => fit_state = *fit,
+            Err(_) => overlays.clear(),
+        }
+        let sample = match result.map(|(s, _)| s) {
             Ok(s) => {
                 if let (Some(tx), Some(sample)) = (&c.series, s) {
                     // The writer thread has the disk; the pipeline never waits on it.
@@ -388,7 +406,7 @@ fn pipeline_loop(mut c: PipelineCtx) {
         };
         if let Some(r) = c.recorder.as_mut() {
             // Never waits: a full queue drops the frame from the recording (counted).
-            r.after_frame(&frame, &*c.pipeline, sample);
+            r.after_frame(&frame, overlays, &*c.pipeline, sample);
             r.watch(sample.as_ref(), errors);
         }
         if sample.is_some() {
@@ -405,7 +423,7 @@ fn pipeline_loop(mut c: PipelineCtx) {
         }
         if due {
             tracks.clear();
-            let _ = c.pipeline.describe_tracks(&mut tracks, crate::console::TRACK_ROWS);
+            crate::console::tracks::describe_fish(&mut tracks, fish, crate::console::TRACK_ROWS);
         }
         c.shared.with_health(|h| {
             h.frames_processed = processed;

@@ -7,17 +7,22 @@
 
 mod boxes;
 pub mod consistency;
-mod driver;
 pub mod inputs;
 pub mod live;
 pub mod metrics;
+mod options;
+mod output;
 pub mod plot;
 pub mod relative;
+mod report;
+mod run;
+pub mod score;
 
 pub use boxes::{BoxesChoice, IndexedBoxes};
-pub use driver::{
-    DepthChoice, EvalOptions, EvalReport, FishRow, MotSummary, ScoredRow, evaluate, write_series, write_tracks,
-};
+pub use options::{DepthChoice, EvalOptions};
+pub use output::{write_series, write_tracks};
+pub use report::{EvalReport, FishRow, MotSummary, RunHead, ScoredRow};
+pub use run::evaluate;
 pub use metrics::{DepthAccuracy, distance_correlation, quantile, rmse};
 pub use relative::RelativeGtParams;
 
