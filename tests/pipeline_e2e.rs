@@ -4,8 +4,8 @@
 
 use fme::capture::{Frame, FrameSource, PixelFormat, RecordedSource};
 use fme::config::Config;
-use fme::pipeline::FishPipeline;
 use fme::motion::Fish;
+use fme::pipeline::FishPipeline;
 use fme::pipeline::{ActivitySample, DepthFitState, Pipeline, PipelineError};
 use fme::sequence::Sequence;
 use fme::units::Seconds;

@@ -143,7 +143,10 @@ pub fn compute(backend: Backend, set: ModelSet, frames: &[Frame]) -> Outputs {
 pub fn activity(backend: Backend, set: ModelSet, frames: &[Frame]) -> Vec<Option<f64>> {
     let cal = fme::calibration::load(&Path::new(SEQ).join("meta.json")).expect("calibration");
     let mut p = FishPipeline::with_backend(&set.config().pipeline(), Some(cal), backend).expect("pipeline");
-    frames.iter().map(|f| p.process(f).expect("frame processed").sample.map(|s| s.mean.0).filter(|m| m.is_finite())).collect()
+    frames
+        .iter()
+        .map(|f| p.process(f).expect("frame processed").sample.map(|s| s.mean.0).filter(|m| m.is_finite()))
+        .collect()
 }
 
 fn reference_path(set: ModelSet, ext: &str) -> PathBuf {

@@ -10,11 +10,13 @@
 //! maps world <-> camera (`p_cam = R * p_world + t`), and [`Camera`] combines them. These implement the
 //! PCS/CCS/WCS conversions of the paper (section 3.1, Fig. 2).
 
+mod angles;
 mod bbox;
 mod camera;
 mod points;
 mod pose;
 
+pub use angles::{angle_between, apparent_length};
 pub use bbox::PixelBox;
 pub use camera::{Camera, Intrinsics};
 pub use points::{CameraPoint, Pixel, WorldPoint};

@@ -23,8 +23,9 @@ pub const MIN_LOOKS: usize = 10;
 /// Looks kept per fish (the most recent; at 5 depth frames/s, 12.8 s).
 pub const LOOKS: usize = 64;
 
-/// Quantile of a fish's lengths taken as its broadside length (as [`crate::motion::heading`]).
-pub const LENGTH_QUANTILE: f64 = crate::motion::heading::LENGTH_QUANTILE;
+/// Quantile of a fish's lengths taken as its broadside length: a fish seen broadside now and then
+/// shows its length in its longest looks (the fish fit here, the speed's heading in `motion`).
+pub const LENGTH_QUANTILE: f64 = 0.95;
 
 /// A fish not seen in a depth frame for this long is forgotten, s.
 pub const RULER_TIMEOUT_S: f64 = 1.0;

@@ -16,22 +16,26 @@
 
 mod fish;
 mod fit;
+mod grid;
 mod method;
 mod references;
 pub mod regressors;
 mod sample;
+mod scale;
 
 pub use fish::{
-    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, FISH_FIT_SMOOTHING_S, FitSmoother, LEARNED_LENGTH_SMOOTHING_S, LOOKS,
-    LengthLearner, MIN_LOOKS, MIN_RULERS, RULER_TIMEOUT_S, Rulers, fit_rulers, ruler_depth,
+    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, FISH_FIT_SMOOTHING_S, FitSmoother, LEARNED_LENGTH_SMOOTHING_S,
+    LENGTH_QUANTILE, LOOKS, LengthLearner, MIN_LOOKS, MIN_RULERS, RULER_TIMEOUT_S, Rulers, fit_rulers, ruler_depth,
 };
 pub use fit::{DepthModel, FitError, ROBUST_INLIER, ReferencePair, References, ScaleShift, fit, fit_robust};
+pub use grid::DepthGrid;
 pub use method::{DepthFit, DepthScale, FitMethod};
 pub use references::{ReferenceFootprints, ReferencePoints};
 pub use sample::{
     CORE_FRAC, DepthSample, MAX_OVERLAPS, MAX_RADIUS, MIN_VISIBLE_POINTS, MIN_VISIBLE_POINTS_BEHIND, MapKind, Overlaps,
     RelativeMap, behind_a_nearer_fish, sample_box_quantile, sample_box_quantile_visible, sample_fish, sample_median,
 };
+pub use scale::{DepthFitState, FitStats, ScaleConfig, ScalePolicy, ScaleSource, Sighting};
 
 /// Most reference objects a scene may have (the paper uses ten).
 pub const MAX_REFERENCES: usize = 32;

@@ -1,11 +1,11 @@
 //! The per-frame activity estimator (paper section 3.3, eq. 5).
 
 use super::heading::{
-    AlongRay, LengthHistogram, SWARM_LENGTH_MEMORY_S, angle_between, apparent_length, fish_length, foreshortening,
-    ruler_foreshortening, speed_from_heading, swarm_floor,
+    AlongRay, LengthHistogram, SWARM_LENGTH_MEMORY_S, fish_length, foreshortening, ruler_foreshortening,
+    speed_from_heading, swarm_floor,
 };
 use super::stats::mean_ci95;
-use crate::geometry::{Camera, CameraPoint, Pixel, PixelBox, WorldPoint};
+use crate::geometry::{Camera, CameraPoint, Pixel, PixelBox, WorldPoint, angle_between, apparent_length};
 use crate::postprocess::{PostprocessConfig, TrackFilter};
 use crate::units::{Metres, MetresPerSecond, Seconds};
 use heapless::Deque;

@@ -15,37 +15,17 @@
 
 use super::PipelineConfig;
 use super::rate::RateMeter;
-use super::substitute::{DepthGrid, Substitute};
-use super::{
-    ActivitySample, Calibration, DepthFitState, Frame, FrameOutcome, Pipeline, PipelineError, QualityFlags,
-    ScaleSource, StageHealth,
-};
+use super::substitute::Substitute;
+use super::{ActivitySample, Calibration, Frame, FrameOutcome, Pipeline, PipelineError, QualityFlags, StageHealth};
 use crate::familiarity::FamiliarityMonitor;
 use crate::geometry::{Camera, PixelBox};
 use crate::infer::{self, DepthNet, Detector, InferSchedule, RgbFrame};
 use crate::metric::{
-    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, DepthFit, DepthScale, FitSmoother, LengthLearner, MapKind, ROBUST_INLIER,
-    ReferenceFootprints, ReferencePoints, References, Rulers, fit_rulers, sample_fish,
+    DepthGrid, MapKind, ReferenceFootprints, ReferencePoints, ScaleConfig, ScalePolicy, ScaleSource, sample_fish,
 };
-use crate::motion::heading::apparent_length;
 use crate::motion::{ActivityEstimator, Fish, Observation};
 use crate::track::{self, Tracker};
 use crate::units::{Metres, MetresPerSecond};
-
-/// Counts of the metric fits (eq. 1-2) since the start, for scoring and the console.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct FitStats {
-    /// Successful fits.
-    pub fits: u64,
-    /// Failed fits (the previous one was kept).
-    pub failures: u64,
-    /// Sum of the successful scale/shift fits' RMS residuals at the references, m.
-    pub residual_sum_m: f64,
-    /// Scale/shift fits with a residual (the regressors have none).
-    pub residuals: u64,
-    /// References rejected as outliers by the robust fit, summed over fits.
-    pub rejected: u64,
-}
 
 /// Detector + tracker + depth + metric fit + post-processing + motion.
 pub struct FishPipeline {
@@ -60,17 +40,8 @@ pub struct FishPipeline {
     estimator: ActivityEstimator,
     refs: ReferencePoints,
     footprints: ReferenceFootprints,
-    fit: Option<DepthFit>,
-    fit_stats: FitStats,
-    /// The fish fit's running scale and shift (`depth.scale`).
-    fish_fit: FitSmoother,
-    /// The fish's looks for the fish fit.
-    rulers: Rulers,
-    /// The cohort length measured under the references' fit (`depth.learn_fish_length`).
-    learned_length: LengthLearner,
-    /// The estimator's tracks, copied for the fish fit (allocated once).
-    views: Vec<Fish>,
-    fit_state: DepthFitState,
+    /// The depth fit and what sets its scale (`depth.scale`, eq. 1-2).
+    scale: ScalePolicy,
     rgb: Vec<u8>,
     dets: Vec<track::Detection>,
     given: Vec<(u32, PixelBox)>,
@@ -170,15 +141,9 @@ impl FishPipeline {
             tracker: Tracker::new(cfg.tracker),
             familiarity: FamiliarityMonitor::new(cfg.familiarity),
             estimator: ActivityEstimator::new(camera, cfg.motion, cfg.postprocess),
-            fit_state: DepthFitState { references_visible: refs.len() as u32, ..DepthFitState::default() },
+            scale: ScalePolicy::new(scale_config(cfg), crate::motion::MAX_FISH, refs.len()),
             refs,
             footprints,
-            fit: None,
-            fit_stats: FitStats::default(),
-            fish_fit: FitSmoother::default(),
-            rulers: Rulers::new(crate::motion::MAX_FISH),
-            learned_length: LengthLearner::new(crate::motion::MAX_FISH),
-            views: Vec::with_capacity(crate::motion::MAX_FISH),
             rgb: Vec::with_capacity(cfg.frame_width as usize * cfg.frame_height as usize * 3),
             dets: Vec::with_capacity(track::MAX_DETS),
             given: Vec::with_capacity(track::MAX_TRACKS),
@@ -215,163 +180,8 @@ impl FishPipeline {
         self.tracker = Tracker::new(self.cfg.tracker);
         self.estimator = ActivityEstimator::new(*self.estimator.camera(), self.cfg.motion, self.cfg.postprocess);
         self.schedule = InferSchedule::new(self.cfg.detector.rate_hz, self.cfg.depth.rate_hz);
-        self.rulers.clear();
-        self.learned_length.reset();
+        self.scale.restart();
         self.familiarity.reset();
-    }
-
-    /// Refits on the current depth map (eq. 1-2) as `depth.scale` says: on the references, or on the
-    /// fish as rulers (with the visible references' pairs added), or the references while at least
-    /// [`AUTO_MIN_REFERENCES`] are visible and fit within [`AUTO_MAX_RESIDUAL_M`], else the fish. A
-    /// failed fit keeps the previous one. Metric maps (ground-truth depth) need no fit.
-    fn refit(&mut self, t_s: f64) {
-        let Some(view) = self.depth_view() else { return };
-        if view.kind() == MapKind::Depth {
-            return;
-        }
-        let scale = self.cfg.depth.scale;
-        let ruler = self.cfg.motion.body_length();
-        let refs = if self.refs.is_empty() { References::new() } else { self.refs.pairs(|px| view.point(px)) };
-        let by_refs = match scale {
-            DepthScale::References => !self.refs.is_empty(),
-            DepthScale::Auto => refs.len() >= AUTO_MIN_REFERENCES || ruler.is_none(),
-            DepthScale::Fish => false,
-        };
-        if by_refs && !self.refs.is_empty() {
-            self.fit_state.references_visible = refs.len() as u32;
-            match self.cfg.depth.fit.fit(&refs, ROBUST_INLIER) {
-                Ok(f) => {
-                    let residual = f.scale_shift().map_or(f64::NAN, |ss| ss.residual_rms.0);
-                    // `auto` leaves references that fit badly (fouled, moved) to the fish.
-                    if scale != DepthScale::Auto || ruler.is_none() || residual <= AUTO_MAX_RESIDUAL_M {
-                        self.fish_fit.reset();
-                        self.accept_reference_fit(f, refs.len());
-                        // `auto` keeps looking at the fish, so they are rulers at once when the
-                        // references go.
-                        if let (DepthScale::Auto, Some(length)) = (scale, ruler) {
-                            self.fish_refit(t_s, length, refs, false);
-                        }
-                        return;
-                    }
-                }
-                Err(e) => {
-                    if scale != DepthScale::Auto || ruler.is_none() {
-                        self.fit_stats.failures += 1;
-                        tracing::debug!("metric fit failed ({e}); keeping the previous fit");
-                        return;
-                    }
-                }
-            }
-        }
-        let Some(length) = ruler else { return };
-        if scale == DepthScale::References {
-            return;
-        }
-        self.fish_refit(t_s, length, refs, true);
-    }
-
-    /// Keeps a fit on the references.
-    fn accept_reference_fit(&mut self, f: DepthFit, visible: usize) {
-        self.fit_stats.fits += 1;
-        let (scale, shift, residual) = match f.scale_shift() {
-            Some(ss) => {
-                self.fit_stats.residual_sum_m += ss.residual_rms.0;
-                self.fit_stats.residuals += 1;
-                self.fit_stats.rejected += u64::from(ss.rejected.count_ones());
-                (ss.s, ss.t, ss.residual_rms.0)
-            }
-            None => (f64::NAN, f64::NAN, f64::NAN),
-        };
-        self.fit = Some(f);
-        self.fit_state = DepthFitState {
-            scale,
-            shift,
-            residual_m: residual,
-            references_visible: visible as u32,
-            fitted: true,
-            source: ScaleSource::References,
-            fish_rulers: 0,
-            ruler_length_m: self.learned_length.length().map_or(0.0, |l| l.0),
-            ruler_length_learned: self.learned_length.length().is_some(),
-        };
-    }
-
-    /// The fish fit (docs/pipeline.md, "The fish as the ruler"): each confirmed fish seen in enough
-    /// depth frames is a reference at its depth scaled by the cohort's length over its broadside
-    /// length ([`Rulers`]); `refs` (the visible references' pairs) are added. The cohort's length is
-    /// `length`, or the one measured under the references' fit while they set the scale
-    /// (`depth.learn_fish_length`, [`LengthLearner`]). With `fit` false (the references set the scale),
-    /// the fish's looks are recorded and their length measured.
-    fn fish_refit(&mut self, t_s: f64, length: crate::units::Metres, refs: References, fit: bool) {
-        self.views.clear();
-        self.views.extend(self.estimator.tracks());
-        // Field by field, so the estimator can be borrowed mutably beside it.
-        let view = depth_view(&self.depth, &self.substitute);
-        let Some(view) = view else { return };
-        let mut pairs = refs.clone();
-        let intrinsics = self.estimator.camera().intrinsics;
-        let (how, views) = (self.cfg.depth.sample, &self.views);
-        let learn = !fit && self.cfg.depth.learn_fish_length;
-        let learned = self.learned_length.length().filter(|_| self.cfg.depth.learn_fish_length);
-        let length = learned.unwrap_or(length);
-        let mut rulers = 0u32;
-        for v in views {
-            // Seen in the last frame.
-            if !self.last_t.is_some_and(|t| t - v.last_seen.0 <= 0.25) {
-                continue;
-            }
-            let centre = v.bbox.center();
-            let others = views.iter().filter(|x| x.id != v.id).map(|x| &x.bbox);
-            let Some(relative) =
-                sample_fish(how, view.kind(), &v.bbox, others, || view.point(centre), |p| view.grid(p))
-            else {
-                continue;
-            };
-            let angle = apparent_length(&intrinsics, &v.bbox, crate::units::Metres(1.0)).0;
-            self.rulers.look(t_s, v.id, &intrinsics, centre, angle, relative);
-            if learn && let Some(l) = self.fit.as_ref().and_then(|f| self.rulers.broadside(v.id, f)) {
-                self.learned_length.push(l);
-            }
-            if !fit || pairs.is_full() {
-                continue;
-            }
-            if let Some(p) = self.rulers.pair(v.id, self.fit.as_ref(), length) {
-                let _ = pairs.push(p);
-                rulers += 1;
-            }
-        }
-        if learn {
-            self.learned_length.commit(t_s);
-        }
-        if !fit {
-            return;
-        }
-        self.fit_state.references_visible = refs.len() as u32;
-        match fit_rulers(&pairs, self.cfg.motion.body_length_cv) {
-            Ok(f) => {
-                let f = self.fish_fit.update(t_s, f);
-                self.fit_stats.fits += 1;
-                self.fit_stats.residual_sum_m += f.residual_rms.0;
-                self.fit_stats.residuals += 1;
-                self.fit_stats.rejected += u64::from(f.rejected.count_ones());
-                self.fit = Some(DepthFit::ScaleShift(f));
-                self.fit_state = DepthFitState {
-                    scale: f.s,
-                    shift: f.t,
-                    residual_m: f.residual_rms.0,
-                    references_visible: refs.len() as u32,
-                    fitted: true,
-                    source: ScaleSource::Fish,
-                    fish_rulers: rulers,
-                    ruler_length_m: length.0,
-                    ruler_length_learned: learned.is_some(),
-                };
-            }
-            Err(e) => {
-                self.fit_stats.failures += 1;
-                tracing::debug!("fish fit failed ({e}); keeping the previous fit");
-            }
-        }
     }
 
     /// Runs the detector, or takes the substitute's detections, and updates the tracker.
@@ -431,7 +241,12 @@ impl FishPipeline {
         self.health.depth_ok = true;
         self.depth_rate.record(frame.timestamp.0);
         self.health.depth_runs += 1;
-        self.refit(frame.timestamp.0);
+        // Field by field: the policy reads the map, the references and the estimator's fish.
+        if let Some(map) = depth_view(&self.depth, &self.substitute) {
+            let fish = self.estimator.tracks().map(|f| (f.id, f.bbox, f.last_seen.0));
+            let intrinsics = self.estimator.camera().intrinsics;
+            self.scale.refit(frame.timestamp.0, map, &self.refs, &intrinsics, fish);
+        }
         Ok(())
     }
 }
@@ -442,6 +257,18 @@ fn depth_view<'a>(net: &'a Option<DepthNet>, sub: &'a Option<Box<dyn Substitute>
         (Some(net), _) => net.last_map().map(|m| m as &dyn DepthGrid),
         (None, Some(s)) => s.depth(),
         (None, None) => None,
+    }
+}
+
+/// What the scale policy reads of the config.
+fn scale_config(cfg: &PipelineConfig) -> ScaleConfig {
+    ScaleConfig {
+        scale: cfg.depth.scale,
+        method: cfg.depth.fit,
+        sample: cfg.depth.sample,
+        learn_length: cfg.depth.learn_fish_length,
+        body_length: cfg.motion.body_length(),
+        body_length_cv: cfg.motion.body_length_cv,
     }
 }
 
@@ -517,12 +344,13 @@ impl Pipeline for FishPipeline {
         // On the fish's scale with the configured length, every fish is as long as the ruler
         // (`ActivityEstimator::set_ruler_length`). With a length measured under the references the
         // fit carries their scale on, and the lengths measured under it with it.
-        let ruler = (self.fit_state.source == ScaleSource::Fish && !self.fit_state.ruler_length_learned)
-            .then_some(Metres(self.fit_state.ruler_length_m));
+        let state = self.scale.state();
+        let ruler =
+            (state.source == ScaleSource::Fish && !state.ruler_length_learned).then_some(Metres(state.ruler_length_m));
         self.estimator.set_ruler_length(ruler);
         // Field by field, so the estimator can be borrowed mutably beside it.
         let view = depth_view(&self.depth, &self.substitute);
-        let (fit, how, obs) = (self.fit.as_ref(), self.cfg.depth.sample, &self.obs);
+        let (fit, how, obs) = (self.scale.fit(), self.cfg.depth.sample, &self.obs);
         let s = self.estimator.update_with(t, obs, |o, px| {
             let view = view?;
             let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
@@ -533,7 +361,7 @@ impl Pipeline for FishPipeline {
                 MapKind::InverseDepth => fit?.depth(r),
             }
         });
-        let metric = self.fit.is_some() || view.is_some_and(|v| v.kind() == MapKind::Depth);
+        let metric = self.scale.fit().is_some() || view.is_some_and(|v| v.kind() == MapKind::Depth);
         let mean = s.mean.map_or(f64::NAN, |m| m.0);
         let ci95_half = s.ci95.map_or(f64::NAN, |(lo, hi)| 0.5 * (hi.0 - lo.0));
         let bls = match self.cfg.motion.body_length() {
@@ -554,7 +382,7 @@ impl Pipeline for FishPipeline {
                 stale: false,
                 unlike_fish: self.familiarity.unlike_fish(),
             },
-            scale: self.fit_state.source,
+            scale: state.source,
         };
         self.fish.clear();
         self.fish.extend(self.estimator.tracks());
@@ -566,8 +394,8 @@ impl Pipeline for FishPipeline {
             fish: &self.fish,
             estimate: s,
             sample: Some(sample),
-            fit: self.fit_state,
-            fit_stats: self.fit_stats,
+            fit: self.scale.state(),
+            fit_stats: self.scale.stats(),
             references_in_view: self.refs.len(),
             health: self.health,
             depth_map: if plan.depth { self.depth.as_ref().and_then(DepthNet::last_map) } else { None },
@@ -582,7 +410,7 @@ impl Pipeline for FishPipeline {
         out.clear();
         // Each reference with the fit's residual there (eq. 1-2): which one was measured wrong or
         // is fouled shows at a glance.
-        let (view, fit) = (self.depth_view(), self.fit.as_ref());
+        let (view, fit) = (self.depth_view(), self.scale.fit());
         out.extend(self.refs.iter().map(|(px, depth)| {
             let fitted = match view {
                 Some(v) if v.kind() == MapKind::Depth => v.point(px).map(Metres),
@@ -595,7 +423,7 @@ impl Pipeline for FishPipeline {
 
     fn depth_grid(&self, size: (u32, u32), grid: (u32, u32), out: &mut Vec<f32>) -> bool {
         let Some(view) = self.depth_view() else { return false };
-        let fit = self.fit.as_ref();
+        let fit = self.scale.fit();
         if view.kind() == MapKind::InverseDepth && fit.is_none() {
             return false;
         }

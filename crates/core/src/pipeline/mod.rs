@@ -22,10 +22,12 @@ mod substitute;
 pub use calibration::Calibration;
 pub use config::PipelineConfig;
 
-pub use fish::{FishPipeline, FitStats};
+pub use fish::FishPipeline;
 pub use frame::{Frame, PixelFormat};
 pub use outcome::FrameOutcome;
-pub use substitute::{DepthGrid, Substitute};
+pub use substitute::Substitute;
+// The depth fit's types, where the pipeline's users have always found them.
+pub use crate::metric::{DepthFitState, DepthGrid, FitStats, ScaleSource};
 
 use crate::units::{MetresPerSecond, Seconds};
 
@@ -85,57 +87,6 @@ pub struct StageHealth {
     pub tracks: u32,
     /// The familiarity monitor's state ("detections look unlike fish", `[familiarity]`).
     pub familiarity: crate::familiarity::FamiliarityState,
-}
-
-/// Metric depth calibration state (paper eq. 1-2), shown by the console `calib` command.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct DepthFitState {
-    /// Fitted scale s.
-    pub scale: f64,
-    /// Fitted shift t.
-    pub shift: f64,
-    /// RMS residual of the fit on the reference objects, m.
-    pub residual_m: f64,
-    /// Reference objects visible in the last depth frame.
-    pub references_visible: u32,
-    /// Whether a fit is available.
-    pub fitted: bool,
-    /// What set the scale of the fit in use (`depth.scale`).
-    pub source: ScaleSource,
-    /// Fish used as rulers in the last fish fit.
-    pub fish_rulers: u32,
-    /// The cohort length the fish fit uses, m (0 before any fish fit).
-    pub ruler_length_m: f64,
-    /// That length was measured under the references' fit (`depth.learn_fish_length`), not configured.
-    pub ruler_length_learned: bool,
-}
-
-/// What set the metric scale of the fit in use (`depth.scale`; docs/pipeline.md).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub enum ScaleSource {
-    /// No fit yet.
-    #[default]
-    None,
-    /// The reference objects (paper eq. 1-2).
-    References,
-    /// The tracked fish of the configured mean length (with any visible references).
-    Fish,
-}
-
-impl ScaleSource {
-    /// Name shown on the console and in the series.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::None => "none",
-            Self::References => "references",
-            Self::Fish => "fish",
-        }
-    }
-
-    /// The source named `name` (as [`Self::name`] writes it).
-    pub fn parse(name: &str) -> Option<Self> {
-        [Self::None, Self::References, Self::Fish].into_iter().find(|s| s.name() == name)
-    }
 }
 
 /// A pipeline: owns all per-frame state; called on the pipeline thread only.

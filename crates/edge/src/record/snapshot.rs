@@ -5,8 +5,8 @@
 //! reference objects with their depth-fit error in cm, and a legend. The metric depth map as a
 //! colour PNG with its scale (near = red, far = blue, unknown = black). docs/recording.md.
 
-use crate::draw::{self, Placer, Rect};
 use super::Overlays;
+use crate::draw::{self, Placer, Rect};
 use fme_core::pipeline::{ActivitySample, Frame};
 use image::{Rgb, RgbImage};
 use std::path::{Path, PathBuf};

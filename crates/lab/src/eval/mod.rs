@@ -19,12 +19,12 @@ mod run;
 pub mod score;
 
 pub use boxes::{BoxesChoice, IndexedBoxes};
+pub use metrics::{DepthAccuracy, distance_correlation, quantile, rmse};
 pub use options::{DepthChoice, EvalOptions};
 pub use output::{write_series, write_tracks};
+pub use relative::RelativeGtParams;
 pub use report::{EvalReport, FishRow, MotSummary, RunHead, ScoredRow};
 pub use run::evaluate;
-pub use metrics::{DepthAccuracy, distance_correlation, quantile, rmse};
-pub use relative::RelativeGtParams;
 
 use std::path::PathBuf;
 

@@ -78,7 +78,8 @@ impl SpeedScorer {
         for i in 0..self.series.len() {
             let r = self.series[i];
             let now = self.true_mps.get(r.row.frame as usize).copied().flatten();
-            let at = if r.est_mps().is_some() { self.truth_at(&self.true_mps, r.t() - r.row.sample.latency.0) } else { now };
+            let at =
+                if r.est_mps().is_some() { self.truth_at(&self.true_mps, r.t() - r.row.sample.latency.0) } else { now };
             (self.series[i].true_now_mps, self.series[i].true_mps) = (now, at);
         }
     }
@@ -115,7 +116,8 @@ impl Scorer for SpeedScorer {
         }
         let truth: Vec<f64> = scored.iter().filter_map(|r| r.true_mps).collect();
         let est: Vec<f64> = scored.iter().filter_map(|r| r.est_mps()).collect();
-        let (now_e, now_t): (Vec<f64>, Vec<f64>) = s.iter().filter_map(|r| Some((r.est_mps()?, r.true_now_mps?))).unzip();
+        let (now_e, now_t): (Vec<f64>, Vec<f64>) =
+            s.iter().filter_map(|r| Some((r.est_mps()?, r.true_now_mps?))).unzip();
         let errors: Vec<f64> = est.iter().zip(&truth).map(|(e, t)| e - t).collect();
         let n = scored.len() as f64;
         report.frames = scored.len();
@@ -131,7 +133,8 @@ impl Scorer for SpeedScorer {
         report.mean_est_mps = est.iter().sum::<f64>() / n;
         report.mean_fish = scored.iter().map(|r| f64::from(r.row.sample.fish)).sum::<f64>() / n;
         // Over the frames with an estimate (a frame without one has no latency).
-        let with_est: Vec<&ActivitySample> = s.iter().filter(|r| r.est_mps().is_some()).map(|r| &r.row.sample).collect();
+        let with_est: Vec<&ActivitySample> =
+            s.iter().filter(|r| r.est_mps().is_some()).map(|r| &r.row.sample).collect();
         report.latency_s = with_est.iter().map(|s| s.latency.0).sum::<f64>() / with_est.len().max(1) as f64;
         published_activity(s, report);
         if !self.has_truth {
@@ -147,7 +150,8 @@ impl Scorer for SpeedScorer {
 
 /// The mean published activity, scored or not (a sequence without truth still has one).
 fn published_activity(series: &[ScoredRow], report: &mut EvalReport) {
-    let activity: Vec<&ActivitySample> = series.iter().map(|r| &r.row.sample).filter(|s| s.mean.0.is_finite()).collect();
+    let activity: Vec<&ActivitySample> =
+        series.iter().map(|r| &r.row.sample).filter(|s| s.mean.0.is_finite()).collect();
     let mean_of = |f: fn(&ActivitySample) -> f64| -> f64 {
         let v: Vec<f64> = activity.iter().map(|s| f(s)).filter(|x| x.is_finite()).collect();
         if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 }

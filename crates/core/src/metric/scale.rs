@@ -1,0 +1,331 @@
+//! Which ruler sets the depth fit's scale (`depth.scale`; docs/pipeline.md "The fish as the
+//! ruler"): the reference objects (paper eq. 1-2), the tracked fish of a known length, or `auto` (the
+//! references while at least [`AUTO_MIN_REFERENCES`] are visible and fit within
+//! [`AUTO_MAX_RESIDUAL_M`], else the fish). Refitted on every depth frame; a failed fit keeps the
+//! previous one.
+
+use super::{
+    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, DepthFit, DepthGrid, DepthSample, DepthScale, FitMethod, FitSmoother,
+    LengthLearner, MapKind, ROBUST_INLIER, ReferencePoints, References, Rulers, fit_rulers, sample_fish,
+};
+use crate::geometry::{Intrinsics, PixelBox, apparent_length};
+use crate::units::Metres;
+
+/// The depth fit in use (paper eq. 1-2) and what set its scale, shown by the console `calib` command.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DepthFitState {
+    /// Fitted scale s.
+    pub scale: f64,
+    /// Fitted shift t.
+    pub shift: f64,
+    /// RMS residual of the fit on the reference objects, m.
+    pub residual_m: f64,
+    /// Reference objects visible in the last depth frame.
+    pub references_visible: u32,
+    /// Whether a fit is available.
+    pub fitted: bool,
+    /// What set the scale of the fit in use (`depth.scale`).
+    pub source: ScaleSource,
+    /// Fish used as rulers in the last fish fit.
+    pub fish_rulers: u32,
+    /// The cohort length the fish fit uses, m (0 before any fish fit).
+    pub ruler_length_m: f64,
+    /// That length was measured under the references' fit (`depth.learn_fish_length`), not configured.
+    pub ruler_length_learned: bool,
+}
+
+/// What set the metric scale of the fit in use (`depth.scale`; docs/pipeline.md).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum ScaleSource {
+    /// No fit yet.
+    #[default]
+    None,
+    /// The reference objects (paper eq. 1-2).
+    References,
+    /// The tracked fish of the configured mean length (with any visible references).
+    Fish,
+}
+
+impl ScaleSource {
+    /// Name shown on the console and in the series.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::References => "references",
+            Self::Fish => "fish",
+        }
+    }
+
+    /// The source named `name` (as [`Self::name`] writes it).
+    pub fn parse(name: &str) -> Option<Self> {
+        [Self::None, Self::References, Self::Fish].into_iter().find(|s| s.name() == name)
+    }
+}
+
+/// Counts of the metric fits (eq. 1-2) since the start, for scoring and the console.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FitStats {
+    /// Successful fits.
+    pub fits: u64,
+    /// Failed fits (the previous one was kept).
+    pub failures: u64,
+    /// Sum of the successful scale/shift fits' RMS residuals at the references, m.
+    pub residual_sum_m: f64,
+    /// Scale/shift fits with a residual (the regressors have none).
+    pub residuals: u64,
+    /// References rejected as outliers by the robust fit, summed over fits.
+    pub rejected: u64,
+}
+
+/// The settings the scale policy reads (from `[depth]` and `[motion]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScaleConfig {
+    /// `depth.scale`.
+    pub scale: DepthScale,
+    /// `depth.fit`: the fit on the references.
+    pub method: FitMethod,
+    /// `depth.sample`: how a fish's relative depth is read.
+    pub sample: DepthSample,
+    /// `depth.learn_fish_length`.
+    pub learn_length: bool,
+    /// `motion.body_length_m` (none: the fish cannot be the ruler).
+    pub body_length: Option<Metres>,
+    /// `motion.body_length_cv`: the spread of the fish's lengths.
+    pub body_length_cv: f64,
+}
+
+/// One fish as the fish fit looks at it: track id, box, time last seen (s).
+pub type Sighting = (u32, PixelBox, f64);
+
+/// The depth fit and the policy that decides what sets its scale. Allocates once.
+#[derive(Debug)]
+pub struct ScalePolicy {
+    cfg: ScaleConfig,
+    fit: Option<DepthFit>,
+    state: DepthFitState,
+    stats: FitStats,
+    /// The fish fit's running scale and shift.
+    fish_fit: FitSmoother,
+    /// The fish's looks for the fish fit.
+    rulers: Rulers,
+    /// The cohort length measured under the references' fit (`depth.learn_fish_length`).
+    learned_length: LengthLearner,
+    /// The fish of the current refit.
+    fish: Vec<Sighting>,
+}
+
+impl ScalePolicy {
+    /// A policy with no fit yet, for at most `max_fish` fish; `references_visible`: the reference
+    /// objects inside the image.
+    pub fn new(cfg: ScaleConfig, max_fish: usize, references_visible: usize) -> Self {
+        Self {
+            cfg,
+            fit: None,
+            state: DepthFitState { references_visible: references_visible as u32, ..DepthFitState::default() },
+            stats: FitStats::default(),
+            fish_fit: FitSmoother::default(),
+            rulers: Rulers::new(max_fish),
+            learned_length: LengthLearner::new(max_fish),
+            fish: Vec::with_capacity(max_fish),
+        }
+    }
+
+    /// The fit in use.
+    pub fn fit(&self) -> Option<&DepthFit> {
+        self.fit.as_ref()
+    }
+
+    /// The fit's state and what set its scale.
+    pub fn state(&self) -> DepthFitState {
+        self.state
+    }
+
+    /// Counts of the fits so far.
+    pub fn stats(&self) -> FitStats {
+        self.stats
+    }
+
+    /// Forgets the fish (tracks restarted); the fit is kept (the camera has not moved).
+    pub fn restart(&mut self) {
+        self.rulers.clear();
+        self.learned_length.reset();
+    }
+
+    /// Refits on `map` (eq. 1-2) as `depth.scale` says, at frame time `t_s`: on `points` (the
+    /// reference objects), or on `fish` as rulers (with the visible references' pairs added). Metric
+    /// maps (ground-truth depth) need no fit.
+    pub fn refit(
+        &mut self,
+        t_s: f64,
+        map: &dyn DepthGrid,
+        points: &ReferencePoints,
+        intrinsics: &Intrinsics,
+        fish: impl IntoIterator<Item = Sighting>,
+    ) {
+        if map.kind() == MapKind::Depth {
+            return;
+        }
+        self.fish.clear();
+        self.fish.extend(fish);
+        let (scale, ruler) = (self.cfg.scale, self.cfg.body_length);
+        let refs = if points.is_empty() { References::new() } else { points.pairs(|px| map.point(px)) };
+        let by_refs = match scale {
+            DepthScale::References => !points.is_empty(),
+            DepthScale::Auto => refs.len() >= AUTO_MIN_REFERENCES || ruler.is_none(),
+            DepthScale::Fish => false,
+        };
+        if by_refs && !points.is_empty() {
+            self.state.references_visible = refs.len() as u32;
+            match self.cfg.method.fit(&refs, ROBUST_INLIER) {
+                Ok(f) => {
+                    let residual = f.scale_shift().map_or(f64::NAN, |ss| ss.residual_rms.0);
+                    // `auto` leaves references that fit badly (fouled, moved) to the fish.
+                    if scale != DepthScale::Auto || ruler.is_none() || residual <= AUTO_MAX_RESIDUAL_M {
+                        self.fish_fit.reset();
+                        self.accept_reference_fit(f, refs.len());
+                        // `auto` keeps looking at the fish, so they are rulers at once when the
+                        // references go.
+                        if let (DepthScale::Auto, Some(length)) = (scale, ruler) {
+                            self.fish_refit(t_s, map, intrinsics, length, refs, false);
+                        }
+                        return;
+                    }
+                }
+                Err(e) => {
+                    if scale != DepthScale::Auto || ruler.is_none() {
+                        self.stats.failures += 1;
+                        tracing::debug!("metric fit failed ({e}); keeping the previous fit");
+                        return;
+                    }
+                }
+            }
+        }
+        let Some(length) = ruler else { return };
+        if scale == DepthScale::References {
+            return;
+        }
+        self.fish_refit(t_s, map, intrinsics, length, refs, true);
+    }
+
+    /// Keeps a fit on the references.
+    fn accept_reference_fit(&mut self, f: DepthFit, visible: usize) {
+        self.stats.fits += 1;
+        let (scale, shift, residual) = match f.scale_shift() {
+            Some(ss) => {
+                self.stats.residual_sum_m += ss.residual_rms.0;
+                self.stats.residuals += 1;
+                self.stats.rejected += u64::from(ss.rejected.count_ones());
+                (ss.s, ss.t, ss.residual_rms.0)
+            }
+            None => (f64::NAN, f64::NAN, f64::NAN),
+        };
+        self.fit = Some(f);
+        self.state = DepthFitState {
+            scale,
+            shift,
+            residual_m: residual,
+            references_visible: visible as u32,
+            fitted: true,
+            source: ScaleSource::References,
+            fish_rulers: 0,
+            ruler_length_m: self.learned_length.length().map_or(0.0, |l| l.0),
+            ruler_length_learned: self.learned_length.length().is_some(),
+        };
+    }
+
+    /// The fish fit: each fish seen in enough depth frames is a reference at its depth scaled by
+    /// the cohort's length over its broadside length ([`Rulers`]); `refs` (the visible references'
+    /// pairs) are added. The cohort's length is `length`, or the one measured under the references'
+    /// fit while they set the scale (`depth.learn_fish_length`, [`LengthLearner`]). With `fit` false
+    /// (the references set the scale), the fish's looks are recorded and their length measured.
+    fn fish_refit(
+        &mut self,
+        t_s: f64,
+        map: &dyn DepthGrid,
+        intrinsics: &Intrinsics,
+        length: Metres,
+        refs: References,
+        fit: bool,
+    ) {
+        let learn = !fit && self.cfg.learn_length;
+        let learned = self.learned_length.length().filter(|_| self.cfg.learn_length);
+        let length = learned.unwrap_or(length);
+        let (pairs, rulers) = self.look_at_fish(t_s, map, intrinsics, length, &refs, fit, learn);
+        if learn {
+            self.learned_length.commit(t_s);
+        }
+        if !fit {
+            return;
+        }
+        self.state.references_visible = refs.len() as u32;
+        match fit_rulers(&pairs, self.cfg.body_length_cv) {
+            Ok(f) => {
+                let f = self.fish_fit.update(t_s, f);
+                self.stats.fits += 1;
+                self.stats.residual_sum_m += f.residual_rms.0;
+                self.stats.residuals += 1;
+                self.stats.rejected += u64::from(f.rejected.count_ones());
+                self.fit = Some(DepthFit::ScaleShift(f));
+                self.state = DepthFitState {
+                    scale: f.s,
+                    shift: f.t,
+                    residual_m: f.residual_rms.0,
+                    references_visible: refs.len() as u32,
+                    fitted: true,
+                    source: ScaleSource::Fish,
+                    fish_rulers: rulers,
+                    ruler_length_m: length.0,
+                    ruler_length_learned: learned.is_some(),
+                };
+            }
+            Err(e) => {
+                self.stats.failures += 1;
+                tracing::debug!("fish fit failed ({e}); keeping the previous fit");
+            }
+        }
+    }
+
+    /// Records each fish seen at `t_s` as a ruler look (and its length, when `learn`); with `fit`,
+    /// returns `refs` with the rulers' pairs added, and how many rulers.
+    #[allow(clippy::too_many_arguments)]
+    fn look_at_fish(
+        &mut self,
+        t_s: f64,
+        map: &dyn DepthGrid,
+        intrinsics: &Intrinsics,
+        length: Metres,
+        refs: &References,
+        fit: bool,
+        learn: bool,
+    ) -> (References, u32) {
+        let mut pairs = refs.clone();
+        let mut rulers = 0u32;
+        for &(id, bbox, last_seen) in &self.fish {
+            // Seen in the last frame.
+            let seen = t_s - last_seen <= 0.25;
+            if !seen {
+                continue;
+            }
+            let centre = bbox.center();
+            let others = self.fish.iter().filter(|x| x.0 != id).map(|x| &x.1);
+            let Some(relative) =
+                sample_fish(self.cfg.sample, map.kind(), &bbox, others, || map.point(centre), |p| map.grid(p))
+            else {
+                continue;
+            };
+            let angle = apparent_length(intrinsics, &bbox, Metres(1.0)).0;
+            self.rulers.look(t_s, id, intrinsics, centre, angle, relative);
+            if learn && let Some(l) = self.fit.as_ref().and_then(|f| self.rulers.broadside(id, f)) {
+                self.learned_length.push(l);
+            }
+            if !fit || pairs.is_full() {
+                continue;
+            }
+            if let Some(p) = self.rulers.pair(id, self.fit.as_ref(), length) {
+                let _ = pairs.push(p);
+                rulers += 1;
+            }
+        }
+        (pairs, rulers)
+    }
+}
