@@ -1,192 +1,16 @@
 //! The per-frame activity estimator (paper section 3.3, eq. 5).
 
-use super::heading::{
-    AlongRay, LengthHistogram, SWARM_LENGTH_MEMORY_S, fish_length, foreshortening, ruler_foreshortening,
-    speed_from_heading, swarm_floor,
-};
+use super::MotionConfig;
+use super::heading::{AlongRay, LengthHistogram, SWARM_LENGTH_MEMORY_S, fish_length, swarm_floor};
+use super::span::{FishLengths, POSITIONS, Position, speed_over_span, within};
 use super::stats::mean_ci95;
-use crate::geometry::{Camera, CameraPoint, Pixel, PixelBox, WorldPoint, angle_between, apparent_length};
+use crate::geometry::{Camera, CameraPoint, Pixel, PixelBox, WorldPoint, apparent_length};
 use crate::postprocess::{PostprocessConfig, TrackFilter};
 use crate::units::{Metres, MetresPerSecond, Seconds};
 use heapless::Deque;
 
-/// Positions kept per track for the speed span.
-const POSITIONS: usize = 32;
-
-/// How a fish's speed is computed from its recent world positions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum SpeedMethod {
-    /// `|P_t - P_ref| / (t - t_ref)` with `P_ref` the oldest position within `speed_span` (at least
-    /// the previous one): with span 0 this is the paper's frame-to-frame speed.
-    #[default]
-    Chord,
-    /// Norm of the least-squares slope of position against time over the positions within
-    /// `speed_span` (at least 3 of them, else the chord): per-fish velocity noise falls with the
-    /// number of positions, and so does the upward bias that noise gives `|v|`.
-    Regression,
-}
-
-impl crate::choice::Choice for SpeedMethod {
-    const ALL: &'static [Self] = &[Self::Chord, Self::Regression];
-}
-
-/// One stored observation of a track.
-#[derive(Debug, Clone, Copy)]
-struct Position {
-    /// Frame time, s.
-    t: f64,
-    /// Box centre lifted with the corrected depth, camera frame, m (speed norms are the same as in
-    /// the world frame; the camera frame separates motion across and along the line of sight).
-    p: [f64; 3],
-    /// Distance from the camera, m.
-    range: f64,
-    /// Apparent body length ([`apparent_length`]), m; NaN when unknown.
-    apparent: f64,
-}
-
-impl Position {
-    /// Unit line of sight: what the box motion measures without depth.
-    fn unit(&self) -> [f64; 3] {
-        [self.p[0] / self.range, self.p[1] / self.range, self.p[2] / self.range]
-    }
-}
-
-/// Within `span` of `t` (the same tolerance everywhere).
-fn within(sample: &Position, t: f64, span: f64) -> bool {
-    t - sample.t <= span * (1.0 + 1e-6) + 1e-9
-}
-
-/// Least-squares velocity of `coords(sample)` over the samples within `span` of `t`; `None` for
-/// fewer than 3. Returns the velocity's norm and the time it refers to (the window's mean time).
-fn regression_speed(
-    samples: &Deque<Position, POSITIONS>,
-    t: f64,
-    span: f64,
-    coords: impl Fn(&Position) -> [f64; 3],
-) -> Option<(f64, f64)> {
-    let inside = || samples.iter().filter(|p| within(p, t, span));
-    let n = inside().count();
-    if n < 3 {
-        return None;
-    }
-    let tm = inside().map(|p| p.t).sum::<f64>() / n as f64;
-    let mut pm = [0.0; 3];
-    for p in inside() {
-        for (m, x) in pm.iter_mut().zip(coords(p)) {
-            *m += x / n as f64;
-        }
-    }
-    let (mut stt, mut stp) = (0.0, [0.0; 3]);
-    for p in inside() {
-        let dt = p.t - tm;
-        stt += dt * dt;
-        for ((s, x), m) in stp.iter_mut().zip(coords(p)).zip(pm) {
-            *s += dt * (x - m);
-        }
-    }
-    (stt > 0.0).then(|| ((stp[0] * stp[0] + stp[1] * stp[1] + stp[2] * stp[2]).sqrt() / stt, tm))
-}
-
-fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
-
 /// Most fish the estimator holds at once; its table is allocated once with this size.
 pub const MAX_FISH: usize = 256;
-
-/// Motion settings: the `[motion]` section of the config (paper eq. 5 and the activity sample).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct MotionConfig {
-    /// Mean fish body length for body lengths/s, m; 0 = estimated per fish
-    /// ([`super::heading::fish_length`]).
-    pub body_length_m: Metres,
-    /// Spread of the cohort's lengths: standard deviation over the mean (a graded cohort about 0.1).
-    /// The fish fit (`depth.scale`) accepts a fish as a ruler within twice this of the others.
-    pub body_length_cv: f64,
-    /// Fewer fish in the mean than this raises the "too few fish" status bit.
-    pub min_fish: u32,
-    /// Time constant of the exponential smoothing of the activity index, s.
-    pub smoothing_s: Seconds,
-    /// Speed is taken over the oldest stored position at most this long ago (at least the previous
-    /// one), s: 0 = frame to frame, as the paper. Longer spans trade latency for less noise (at most
-    /// 32 positions are kept, so spans beyond 32 frames use the oldest of those).
-    pub speed_span_s: Seconds,
-    /// A fish enters the mean only once it has been tracked this long, s: a young track's speed is a
-    /// chord over its first few frames, noisy and biased. 0 = every fish with two positions, as the
-    /// paper.
-    pub min_age_s: Seconds,
-    /// Chord (the paper) or least-squares regression over the span.
-    pub speed_method: SpeedMethod,
-    /// Where the speed along the line of sight comes from: the fish's heading
-    /// ([`super::heading`]) or the change of its depth (the paper).
-    pub along_ray: AlongRay,
-    /// A fish's width over its length, as seen head-on (salmon about 0.1): the heading method's
-    /// foreshortening model.
-    pub body_width_ratio: f64,
-    /// A track not seen for this long is forgotten (its slot is reused), s.
-    pub track_timeout_s: Seconds,
-    /// Per-fish speeds above this are treated as glitches and left out of the mean, m/s.
-    pub max_speed_mps: MetresPerSecond,
-}
-
-impl Default for MotionConfig {
-    fn default() -> Self {
-        Self {
-            body_length_m: Metres(0.35),
-            body_length_cv: 0.1,
-            min_fish: 3,
-            smoothing_s: Seconds(60.0),
-            // 1 s chords instead of the paper's frame-to-frame speed (docs/accuracy.md, ablations);
-            // the estimate then refers to t - 0.5 s (`SwarmEstimate::latency`).
-            speed_span_s: Seconds(1.0),
-            // A full span before a fish counts (docs/accuracy.md, ablations).
-            min_age_s: Seconds(1.0),
-            speed_method: SpeedMethod::Chord,
-            along_ray: AlongRay::Heading,
-            body_width_ratio: 0.1,
-            track_timeout_s: Seconds(1.0),
-            max_speed_mps: MetresPerSecond(10.0),
-        }
-    }
-}
-
-impl MotionConfig {
-    /// The configured body length, or `None` when it is estimated per fish (`body_length_m = 0`).
-    pub fn body_length(&self) -> Option<Metres> {
-        (self.body_length_m.0 > 0.0).then_some(self.body_length_m)
-    }
-
-    /// Checks ranges; the error names the key.
-    pub fn validate(&self) -> Result<(), &'static str> {
-        if !(self.body_length_m.0.is_finite() && self.body_length_m.0 >= 0.0) {
-            return Err("motion.body_length_m must be >= 0 m (0 = estimated per fish)");
-        }
-        if !(self.body_length_cv.is_finite() && (0.0..=0.5).contains(&self.body_length_cv)) {
-            return Err("motion.body_length_cv must be within 0..=0.5");
-        }
-        if !(self.speed_span_s.0.is_finite() && self.speed_span_s.0 >= 0.0) {
-            return Err("motion.speed_span_s must be zero or a positive number of seconds");
-        }
-        if !(self.min_age_s.0.is_finite() && self.min_age_s.0 >= 0.0) {
-            return Err("motion.min_age_s must be zero or a positive number of seconds");
-        }
-        if !(self.body_width_ratio.is_finite() && (0.0..=0.5).contains(&self.body_width_ratio)) {
-            return Err("motion.body_width_ratio must be within 0..=0.5");
-        }
-        if !(self.smoothing_s.0.is_finite() && self.smoothing_s.0 > 0.0) {
-            return Err("motion.smoothing_s must be a positive number of seconds");
-        }
-        if !(self.track_timeout_s.0.is_finite() && self.track_timeout_s.0 > 0.0) {
-            return Err("motion.track_timeout_s must be a positive number of seconds");
-        }
-        if !(self.max_speed_mps.0.is_finite() && self.max_speed_mps.0 > 0.0) {
-            return Err("motion.max_speed_mps must be a positive speed in m/s");
-        }
-        Ok(())
-    }
-}
 
 /// One tracked fish in one frame, as the tracker (or ground truth) gives it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -378,17 +202,7 @@ impl ActivityEstimator {
         mut depth_at: impl FnMut(&Observation, Pixel) -> Option<Metres>,
     ) -> SwarmEstimate {
         let mut out = SwarmEstimate { t, ..Default::default() };
-        let (mut n, mut sum, mut sum_sq, mut lag) = (0usize, 0.0, 0.0, 0.0);
-        let (mut n_bl, mut sum_bl) = (0usize, 0.0);
-        // The swarm's lengths fade with time, so they follow the fish in view.
-        if t.0.is_finite() {
-            if self.swarm_lengths_t.is_finite() && t.0 > self.swarm_lengths_t {
-                self.swarm_lengths.decay((-(t.0 - self.swarm_lengths_t) / SWARM_LENGTH_MEMORY_S).exp() as f32);
-            }
-            if self.swarm_lengths_t.is_nan() || t.0 > self.swarm_lengths_t {
-                self.swarm_lengths_t = t.0;
-            }
-        }
+        self.age_swarm_lengths(t.0);
         // Lengths are only needed by the heading method and for an estimated body length: with the
         // depth chord and a configured length, none of this runs per fish.
         let wants_lengths = self.motion.along_ray == AlongRay::Heading || self.motion.body_length().is_none();
@@ -396,117 +210,109 @@ impl ActivityEstimator {
         // Forget tracks not seen for too long, so their slots can be reused.
         let timeout = self.motion.track_timeout_s.0;
         self.tracks.retain(|s| t.0 - s.last_seen <= timeout || !t.0.is_finite());
+        let mut sums = SwarmSums::default();
         for obs in observations {
-            if !obs.bbox.is_valid() || !t.0.is_finite() {
-                out.skipped += 1;
-                continue;
-            }
-            let idx = match self.tracks.iter().position(|s| s.id == obs.id) {
-                Some(i) => i,
-                None if self.tracks.len() < self.capacity => {
-                    self.tracks.push(FishMotion::new(obs.id, t.0));
-                    self.tracks.len() - 1
-                }
-                None => {
-                    out.skipped += 1;
-                    continue;
-                }
-            };
-            let s = &mut self.tracks[idx];
-            if t.0 <= s.last_seen {
-                out.skipped += 1;
-                continue;
-            }
-            s.last_seen = t.0;
-            let corr = s.filter.correct_box(&self.post, t, obs.bbox);
-            out.boxes_corrected += (corr.width_corrected || corr.height_corrected) as u32;
-            s.bbox = corr.bbox;
-            let centre = corr.bbox.center();
-            s.depth_measured = depth_at(obs, centre);
-            let (depth, jumped) = s.filter.correct_depth(&self.post, t, s.depth_measured);
-            out.depths_corrected += jumped as u32;
-            s.depth = depth;
-            s.speed = None;
-            let Some(point) = depth.and_then(|d| self.camera.intrinsics.unproject(centre, d).ok()) else {
-                out.skipped += 1;
-                continue;
-            };
-            let range = point.range().0;
-            let apparent = if wants_lengths {
-                apparent_length(&self.camera.intrinsics, &corr.bbox, Metres(range)).0
-            } else {
-                f64::NAN
-            };
-            if apparent.is_finite() && apparent > 0.0 {
-                s.lengths.add(Metres(apparent));
-                self.swarm_lengths.add(Metres(apparent));
-            }
-            // Reference position: the oldest within the speed span, at least the previous one.
-            while s.positions.front().is_some_and(|p| t.0 - p.t > timeout) || s.positions.is_full() {
-                s.positions.pop_front();
-            }
-            let span = self.motion.speed_span_s.0;
-            let reference = s.positions.iter().find(|p| within(p, t.0, span)).or(s.positions.back()).copied();
-            let now = Position { t: t.0, p: [point.0.x, point.0.y, point.0.z], range, apparent };
-            let _ = s.positions.push_back(now);
-            let Some(reference) = reference else { continue };
-            let regression = |coords: fn(&Position) -> [f64; 3]| match self.motion.speed_method {
-                SpeedMethod::Regression => regression_speed(&s.positions, t.0, span, coords),
-                SpeedMethod::Chord => None,
-            };
-            let chord_time = 0.5 * (t.0 + reference.t);
-            let estimated_length = || self.ruler_length.or_else(|| fish_length(&s.lengths, self.swarm_floor));
-            let (v, t_ref) = match self.motion.along_ray {
-                AlongRay::Depth => regression(|p| p.p)
-                    .unwrap_or_else(|| (distance(now.p, reference.p) / (t.0 - reference.t), chord_time)),
-                AlongRay::Heading => {
-                    // Speed across the line of sight (its angular speed times the mean range of the
-                    // span), over the foreshortening averaged over the same span: one pass for the
-                    // mean range and the mean apparent length where known.
-                    let (mut n_in, mut range_sum, mut n_seen, mut seen_sum) = (0usize, 0.0, 0usize, 0.0);
-                    for p in s.positions.iter().filter(|p| p.t >= reference.t) {
-                        n_in += 1;
-                        range_sum += p.range;
-                        if p.apparent.is_finite() && p.apparent > 0.0 {
-                            n_seen += 1;
-                            seen_sum += p.apparent;
-                        }
-                    }
-                    let range = range_sum / n_in as f64;
-                    let (across, t_ref) =
-                        regression(Position::unit).map(|(w, tm)| (w * range, tm)).unwrap_or_else(|| {
-                            (range * angle_between(now.p, reference.p) / (t.0 - reference.t), chord_time)
-                        });
-                    let depth_chord = regression(|p| p.p)
-                        .map_or_else(|| distance(now.p, reference.p) / (t.0 - reference.t), |(v, _)| v);
-                    let apparent = (n_seen > 0).then(|| Metres(seen_sum / n_seen as f64));
-                    let cos = apparent.zip(estimated_length()).and_then(|(a, l)| match self.ruler_length {
-                        Some(_) => ruler_foreshortening(a, l, self.motion.body_width_ratio),
-                        None => foreshortening(a, l, self.motion.body_width_ratio),
-                    });
-                    (cos.map_or(f64::NAN, |c| speed_from_heading(across, c, depth_chord)), t_ref)
-                }
-            };
-            if !v.is_finite() || v > self.motion.max_speed_mps.0 {
-                out.skipped += 1;
-                continue;
-            }
-            s.speed = Some(v);
-            if t.0 - s.first_seen < self.motion.min_age_s.0 * (1.0 - 1e-6) {
-                continue;
-            }
-            n += 1;
-            sum += v;
-            sum_sq += v * v;
-            lag += t.0 - t_ref;
-            if let Some(l) = self.motion.body_length().or_else(estimated_length) {
-                n_bl += 1;
-                sum_bl += v / l.0;
+            if let Some(fish) = self.observe(t, obs, &mut depth_at, wants_lengths, &mut out) {
+                sums.add(fish, self.motion.body_length());
             }
         }
-        if let Some((mean, lo, hi)) = mean_ci95(n, sum, sum_sq) {
+        self.finish(t, &sums, &mut out);
+        out
+    }
+
+    /// The swarm's lengths fade with time, so they follow the fish in view.
+    fn age_swarm_lengths(&mut self, t: f64) {
+        if !t.is_finite() {
+            return;
+        }
+        if self.swarm_lengths_t.is_finite() && t > self.swarm_lengths_t {
+            self.swarm_lengths.decay((-(t - self.swarm_lengths_t) / SWARM_LENGTH_MEMORY_S).exp() as f32);
+        }
+        if self.swarm_lengths_t.is_nan() || t > self.swarm_lengths_t {
+            self.swarm_lengths_t = t;
+        }
+    }
+
+    /// The slot of fish `id`, a new one while there is room.
+    fn slot(&mut self, id: u32, t: f64) -> Option<usize> {
+        match self.tracks.iter().position(|s| s.id == id) {
+            Some(i) => Some(i),
+            None if self.tracks.len() < self.capacity => {
+                self.tracks.push(FishMotion::new(id, t));
+                Some(self.tracks.len() - 1)
+            }
+            None => None,
+        }
+    }
+
+    /// One observation: eq. 3-4 on its box and depth, its position, and its speed over the span.
+    /// Returns its speed when the fish is old enough to enter the mean; counts what it skips.
+    fn observe(
+        &mut self,
+        t: Seconds,
+        obs: &Observation,
+        depth_at: &mut impl FnMut(&Observation, Pixel) -> Option<Metres>,
+        wants_lengths: bool,
+        out: &mut SwarmEstimate,
+    ) -> Option<InMean> {
+        let idx = (obs.bbox.is_valid() && t.0.is_finite()).then(|| self.slot(obs.id, t.0)).flatten();
+        let Some(s) = idx.map(|i| &mut self.tracks[i]).filter(|s| t.0 > s.last_seen) else {
+            out.skipped += 1;
+            return None;
+        };
+        s.last_seen = t.0;
+        let corr = s.filter.correct_box(&self.post, t, obs.bbox);
+        out.boxes_corrected += (corr.width_corrected || corr.height_corrected) as u32;
+        s.bbox = corr.bbox;
+        let centre = corr.bbox.center();
+        s.depth_measured = depth_at(obs, centre);
+        let (depth, jumped) = s.filter.correct_depth(&self.post, t, s.depth_measured);
+        out.depths_corrected += jumped as u32;
+        s.depth = depth;
+        s.speed = None;
+        let Some(point) = depth.and_then(|d| self.camera.intrinsics.unproject(centre, d).ok()) else {
+            out.skipped += 1;
+            return None;
+        };
+        let range = point.range().0;
+        let apparent = if wants_lengths {
+            apparent_length(&self.camera.intrinsics, &corr.bbox, Metres(range)).0
+        } else {
+            f64::NAN
+        };
+        if apparent.is_finite() && apparent > 0.0 {
+            s.lengths.add(Metres(apparent));
+            self.swarm_lengths.add(Metres(apparent));
+        }
+        // Reference position: the oldest within the speed span, at least the previous one.
+        let timeout = self.motion.track_timeout_s.0;
+        while s.positions.front().is_some_and(|p| t.0 - p.t > timeout) || s.positions.is_full() {
+            s.positions.pop_front();
+        }
+        let span = self.motion.speed_span_s.0;
+        let reference = s.positions.iter().find(|p| within(p, t.0, span)).or(s.positions.back()).copied();
+        let now = Position { t: t.0, p: [point.0.x, point.0.y, point.0.z], range, apparent };
+        let _ = s.positions.push_back(now);
+        let reference = reference?;
+        let lengths = FishLengths { ruler: self.ruler_length, swarm_floor: self.swarm_floor };
+        let (v, t_ref) = speed_over_span(&self.motion, lengths, &s.positions, &s.lengths, now, reference);
+        if !v.is_finite() || v > self.motion.max_speed_mps.0 {
+            out.skipped += 1;
+            return None;
+        }
+        s.speed = Some(v);
+        if t.0 - s.first_seen < self.motion.min_age_s.0 * (1.0 - 1e-6) {
+            return None;
+        }
+        Some(InMean { v, lag: t.0 - t_ref, length: lengths.estimate(&s.lengths) })
+    }
+
+    /// Eq. 5 over the fish in the mean, its 95% interval, and the smoothed value.
+    fn finish(&mut self, t: Seconds, sums: &SwarmSums, out: &mut SwarmEstimate) {
+        let n = sums.n;
+        if let Some((mean, lo, hi)) = mean_ci95(n, sums.sum, sums.sum_sq) {
             out.n_fish = n;
-            out.latency = Seconds(lag / n as f64);
+            out.latency = Seconds(sums.lag / n as f64);
             out.mean = Some(MetresPerSecond(mean));
             out.ci95 = Some((MetresPerSecond(lo.max(0.0)), MetresPerSecond(hi)));
             self.smoothed = Some(match self.smoothed {
@@ -518,9 +324,44 @@ impl ActivityEstimator {
                 None => (t.0, mean),
             });
         }
-        out.mean_bls = (n_bl > 0).then(|| sum_bl / n_bl as f64);
+        out.mean_bls = (sums.n_bl > 0).then(|| sums.sum_bl / sums.n_bl as f64);
         out.smoothed = self.smoothed.map(|s| MetresPerSecond(s.1));
-        out
+    }
+}
+
+/// A fish's speed as it enters the mean.
+#[derive(Debug, Clone, Copy)]
+struct InMean {
+    /// 3D speed, m/s.
+    v: f64,
+    /// How far back the speed refers to, s.
+    lag: f64,
+    /// Its estimated length (ruler or its own), for body lengths/s without a configured length.
+    length: Option<Metres>,
+}
+
+/// Running sums of eq. 5 over one frame.
+#[derive(Debug, Default)]
+struct SwarmSums {
+    n: usize,
+    sum: f64,
+    sum_sq: f64,
+    lag: f64,
+    n_bl: usize,
+    sum_bl: f64,
+}
+
+impl SwarmSums {
+    /// Adds one fish; body lengths/s divide by `body_length` when configured, else its own length.
+    fn add(&mut self, f: InMean, body_length: Option<Metres>) {
+        self.n += 1;
+        self.sum += f.v;
+        self.sum_sq += f.v * f.v;
+        self.lag += f.lag;
+        if let Some(l) = body_length.or(f.length) {
+            self.n_bl += 1;
+            self.sum_bl += f.v / l.0;
+        }
     }
 }
 
@@ -528,6 +369,7 @@ impl ActivityEstimator {
 mod tests {
     use super::*;
     use crate::geometry::{Intrinsics, Pose};
+    use crate::motion::SpeedMethod;
     use nalgebra::Vector3;
 
     fn camera() -> Camera {

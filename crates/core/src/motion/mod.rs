@@ -13,10 +13,13 @@
 //! foreshortening. All per-track state is fixed-size and the track table is allocated once, at
 //! construction: steady-state updates never touch the heap.
 
+mod config;
 mod estimator;
 pub mod heading;
+mod span;
 mod stats;
 
-pub use estimator::{ActivityEstimator, Fish, MAX_FISH, MotionConfig, Observation, SpeedMethod, SwarmEstimate};
+pub use config::{MotionConfig, SpeedMethod};
+pub use estimator::{ActivityEstimator, Fish, MAX_FISH, Observation, SwarmEstimate};
 pub use heading::AlongRay;
 pub use stats::{mean_ci95, student_t975};
