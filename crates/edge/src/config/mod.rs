@@ -3,7 +3,9 @@
 //! [`Config::load`] reads `config/fme.toml`-style files; [`Config::load_with`] adds command-line
 //! `--set section.key=value` overrides. Every error names the file (or the `--set`), the line and
 //! the dotted key (`output.modbus.mode`), so a technician can fix the file without reading code.
-//! The pipeline sections are the stage modules' own types; this module composes and checks them.
+//! Every section is its module's own type with its own check (the pipeline's in the core's stage
+//! modules, the edge's in `capture/config.rs`, `output/config/`, ...); each check names the key in
+//! a [`KeyError`], and this module places it in the file or the `--set`.
 
 pub mod allow;
 pub mod files;
