@@ -89,13 +89,13 @@ impl MqttConfig {
         )?;
         let delays = self.reconnect_min_ms <= self.reconnect_max_ms;
         ensure(delays, "output.mqtt.reconnect_min_ms", "must be <= output.mqtt.reconnect_max_ms")?;
-        let (cert, key) = (self.cert_file.as_os_str().is_empty(), self.key_file.as_os_str().is_empty());
+        let (no_cert, no_key) = (self.cert_file.as_os_str().is_empty(), self.key_file.as_os_str().is_empty());
         ensure(
-            cert == key,
-            if key { "output.mqtt.key_file" } else { "output.mqtt.cert_file" },
+            no_cert == no_key,
+            if no_key { "output.mqtt.key_file" } else { "output.mqtt.cert_file" },
             "a client certificate needs both output.mqtt.cert_file and output.mqtt.key_file",
         )?;
-        let tls_files = !self.ca_file.as_os_str().is_empty() || !cert;
+        let tls_files = !self.ca_file.as_os_str().is_empty() || !no_cert;
         ensure(!tls_files || self.tls, "output.mqtt.tls", "must be true when output.mqtt.ca_file or cert_file is set")?;
         ensure(
             self.password_file.as_os_str().is_empty() || !self.username.is_empty(),
