@@ -131,10 +131,10 @@ fn the_scale_keys_validate() {
     c.depth.scale = DepthScale::Fish;
     assert!(c.validate().is_ok());
     c.motion.body_length_m = Metres(0.0);
-    assert_eq!(c.validate().unwrap_err().0, "depth.scale");
+    assert_eq!(c.validate().unwrap_err().key, "depth.scale");
     let mut c = Config::default();
     c.motion.body_length_cv = 0.9;
-    assert_eq!(c.validate().unwrap_err().0, "motion.body_length_cv");
+    assert_eq!(c.validate().unwrap_err().key, "motion.body_length_cv");
     let text = "[depth]\nscale = \"ruler\"\n";
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("bad.toml");

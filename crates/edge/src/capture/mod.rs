@@ -1,6 +1,7 @@
 //! Frame sources: V4L2 cameras and recorded sequences, behind one [`FrameSource`] trait, and the
 //! bounded drop-oldest [`FrameQueue`] that decouples capture from inference.
 
+pub mod config;
 mod queue;
 mod recorded;
 mod v4l2;

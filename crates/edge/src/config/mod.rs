@@ -3,15 +3,20 @@
 //! [`Config::load`] reads `config/fme.toml`-style files; [`Config::load_with`] adds command-line
 //! `--set section.key=value` overrides. Every error names the file (or the `--set`), the line and
 //! the dotted key (`output.modbus.mode`), so a technician can fix the file without reading code.
-//! The pipeline sections are the stage modules' own types; this module composes and checks them.
+//! Every section is its module's own type with its own check (the pipeline's in the core's stage
+//! modules, the edge's in `capture/config.rs`, `output/config/`, ...); each check names the key in
+//! a [`KeyError`], and this module places it in the file or the `--set`.
 
 pub mod allow;
 pub mod files;
+mod key_error;
 mod lines;
 pub mod ranges;
 mod schema;
 mod stages;
 
+pub use crate::output::config::{is_host_port, valid_topic_level};
+pub use key_error::{KeyError, ensure};
 pub use schema::*;
 
 use std::path::{Path, PathBuf};
@@ -124,7 +129,7 @@ impl Config {
             }
             located(key, message)
         })?;
-        if let Err((key, message)) = config.validate() {
+        if let Err(KeyError { key, message }) = config.validate() {
             return Err(located(key, message));
         }
         Ok((config, effective))
@@ -135,109 +140,18 @@ impl Config {
         toml::to_string(self).unwrap_or_else(|e| format!("# cannot show the config: {e}\n"))
     }
 
-    /// Checks values that types alone cannot: ranges, consistency between keys.
-    /// Returns the first problem as (dotted key, message).
-    pub fn validate(&self) -> Result<(), (String, String)> {
-        fn err(key: &str, msg: impl Into<String>) -> Result<(), (String, String)> {
-            Err((key.to_string(), msg.into()))
-        }
-        // Every duration, rate, size and count key against its documented range (`ranges::RANGES`).
+    /// Checks values that types alone cannot: every ranged key against its documented range
+    /// ([`ranges::RANGES`]), then each section's own check in file order. The first problem is
+    /// the error.
+    pub fn validate(&self) -> Result<(), KeyError> {
         let doc =
-            toml::Value::try_from(self).map_err(|e| ("?".to_string(), format!("cannot check the values: {e}")))?;
+            toml::Value::try_from(self).map_err(|e| KeyError::new("?", format!("cannot check the values: {e}")))?;
         ranges::check(&doc)?;
-        let s = &self.source;
-        if s.path.as_os_str().is_empty() {
-            return err("source.path", "must name a /dev/videoN device or a sequence directory");
-        }
-        if s.reconnect_min_ms > s.reconnect_max_ms {
-            return err("source.reconnect_min_ms", "must be <= source.reconnect_max_ms");
-        }
-        // The pipeline sections check themselves; their messages start with or name the key.
-        let keyed = |m: &str| (m.split_whitespace().next().unwrap_or("?").to_string(), m.to_string());
-        let infer_err = |e: fme_core::infer::InferError| match e {
-            fme_core::infer::InferError::Config { key, reason } => (key.to_string(), reason),
-            other => ("?".to_string(), other.to_string()),
-        };
-        self.detector.validate().map_err(infer_err)?;
-        self.depth.validate().map_err(infer_err)?;
-        self.tracker.validate().map_err(|e| match e {
-            fme_core::track::TrackerConfigError::Key(k, m) => (format!("tracker.{k}"), m),
-            other => ("tracker".to_string(), other.to_string()),
-        })?;
-        self.postprocess.validate().map_err(keyed)?;
-        self.motion.validate().map_err(keyed)?;
-        self.familiarity.validate().map_err(|m| keyed(&m))?;
-        if self.depth.scale == fme_core::metric::DepthScale::Fish && self.motion.body_length().is_none() {
-            return err("depth.scale", "\"fish\" needs the cohort's mean length: motion.body_length_m > 0");
-        }
-        let m = &self.output.modbus;
-        match m.mode {
-            ModbusMode::TcpServer if !is_host_port(&m.listen) => {
-                return err("output.modbus.listen", format!("must be HOST:PORT, got {:?}", m.listen));
-            }
-            ModbusMode::TcpClient if !is_host_port(&m.peer) => {
-                return err("output.modbus.peer", format!("must be HOST:PORT, got {:?}", m.peer));
-            }
-            ModbusMode::RtuServer | ModbusMode::RtuClient if m.serial_device.is_empty() => {
-                return err("output.modbus.serial_device", "must name a serial device");
-            }
-            _ => {}
-        }
-        if m.reconnect_min_ms > m.reconnect_max_ms {
-            return err("output.modbus.reconnect_min_ms", "must be <= output.modbus.reconnect_max_ms");
-        }
-        if let Err(e) = allow::AllowList::parse(&m.allow) {
-            return err("output.modbus.allow", e);
-        }
-        let q = &self.output.mqtt;
-        if q.enabled && !is_host_port(&q.broker) {
-            return err("output.mqtt.broker", format!("must be HOST:PORT, got {:?}", q.broker));
-        }
-        if !valid_topic_level(&q.prefix) || q.prefix.is_empty() {
-            return err(
-                "output.mqtt.prefix",
-                format!("must be a non-empty topic level without / + # or spaces, got {:?}", q.prefix),
-            );
-        }
-        if !valid_topic_level(&q.box_id) {
-            return err(
-                "output.mqtt.box_id",
-                format!("must be a topic level without / + # or spaces (empty = host name), got {:?}", q.box_id),
-            );
-        }
-        if q.reconnect_min_ms > q.reconnect_max_ms {
-            return err("output.mqtt.reconnect_min_ms", "must be <= output.mqtt.reconnect_max_ms");
-        }
-        if q.cert_file.as_os_str().is_empty() != q.key_file.as_os_str().is_empty() {
-            let key = if q.key_file.as_os_str().is_empty() { "output.mqtt.key_file" } else { "output.mqtt.cert_file" };
-            return err(key, "a client certificate needs both output.mqtt.cert_file and output.mqtt.key_file");
-        }
-        let tls_files = !q.ca_file.as_os_str().is_empty() || !q.cert_file.as_os_str().is_empty();
-        if tls_files && !q.tls {
-            return err("output.mqtt.tls", "must be true when output.mqtt.ca_file or cert_file is set");
-        }
-        if !q.password_file.as_os_str().is_empty() && q.username.is_empty() {
-            return err("output.mqtt.username", "must be set when output.mqtt.password_file is set");
-        }
-        let mx = &self.output.metrics;
-        if !mx.listen.is_empty() && !is_host_port(&mx.listen) {
-            return err(
-                "output.metrics.listen",
-                format!("must be HOST:PORT (e.g. \"127.0.0.1:9464\") or empty (off), got {:?}", mx.listen),
-            );
-        }
-        if let Err(e) = allow::AllowList::parse(&mx.allow) {
-            return err("output.metrics.allow", e);
-        }
-        let f = &self.feeding;
-        if f.off_below_mps > f.on_above_mps {
-            return err("feeding.off_below_mps", "must be <= feeding.on_above_mps (hysteresis)");
-        }
-        let r = &self.record;
-        if r.alarm_high_mps > 0.0 && r.alarm_high_mps <= r.alarm_low_mps {
-            return err("record.alarm_high_mps", "must be > record.alarm_low_mps");
-        }
-        Ok(())
+        self.source.validate()?;
+        stages::check(self)?;
+        self.output.validate()?;
+        self.feeding.validate()?;
+        self.record.validate()
     }
 }
 
@@ -270,32 +184,6 @@ impl Config {
             ));
         }
         out
-    }
-}
-
-/// Whether `s` may be one level of an MQTT topic: no `/`, no wildcards `+` `#`, no spaces or
-/// control characters, at most 64 bytes (empty is allowed here; callers decide).
-pub fn valid_topic_level(s: &str) -> bool {
-    s.len() <= 64 && !s.chars().any(|c| c == '/' || c == '+' || c == '#' || c.is_whitespace() || c.is_control())
-}
-
-/// Whether `s` looks like `HOST:PORT` (an IPv4/IPv6 socket address, or a host name and a port).
-/// Names are resolved when used, not here: validation must not depend on DNS.
-pub fn is_host_port(s: &str) -> bool {
-    if s.parse::<std::net::SocketAddr>().is_ok() {
-        return true;
-    }
-    match s.rsplit_once(':') {
-        Some((host, port)) => {
-            // A host of digits and dots is meant as an IPv4 address and must be one
-            // (`256.256.256.256` is not a name to look up later).
-            let dotted = host.chars().all(|c| c.is_ascii_digit() || c == '.');
-            port.parse::<u16>().is_ok()
-                && !host.is_empty()
-                && host.chars().all(|c| c.is_ascii_alphanumeric() || c == '.' || c == '-')
-                && (!dotted || host.parse::<std::net::Ipv4Addr>().is_ok())
-        }
-        None => false,
     }
 }
 
@@ -437,6 +325,44 @@ mod tests {
         {
             assert!(!is_host_port(bad), "{bad}");
         }
+    }
+
+    #[test]
+    fn every_section_check_returns_a_key_error() {
+        let peer = ModbusConfig { mode: ModbusMode::TcpClient, peer: "x".into(), ..Default::default() };
+        assert_eq!(peer.validate(), Err(KeyError::new("output.modbus.peer", "must be HOST:PORT, got \"x\"")));
+        let source = SourceConfig { path: "".into(), ..Default::default() };
+        assert_eq!(source.validate().map_err(|e| e.key), Err("source.path".to_string()));
+        let feeding = FeedingConfig { off_below_mps: 0.5, ..Default::default() };
+        assert_eq!(feeding.validate().map_err(|e| e.key), Err("feeding.off_below_mps".to_string()));
+        let record = RecordConfig { alarm_low_mps: 0.5, alarm_high_mps: 0.2, ..Default::default() };
+        assert_eq!(record.validate().map_err(|e| e.key), Err("record.alarm_high_mps".to_string()));
+        let mqtt = MqttConfig { password_file: "/etc/fme/pw".into(), ..Default::default() };
+        let e = mqtt.validate().err();
+        assert_eq!(
+            e.map(|e| e.to_string()).as_deref(),
+            Some("key `output.mqtt.username`: must be set when output.mqtt.password_file is set")
+        );
+        // The composition keeps the sections' order: the first problem in the file is the error.
+        let c = Config { source, output: OutputConfig { modbus: peer, ..Default::default() }, ..Default::default() };
+        assert_eq!(c.validate().map_err(|e| e.key), Err("source.path".to_string()));
+    }
+
+    #[test]
+    fn pipeline_section_errors_name_their_key() {
+        for (text, key) in [
+            ("[detector]\nmax_candidates = 1\n", "detector.max_candidates"),
+            ("[depth]\nstd = [0.0, 1.0, 1.0]\n", "depth.std"),
+            ("[familiarity]\nmin_out = 9\n", "familiarity.min_out"),
+            ("[depth]\nscale = \"fish\"\n[motion]\nbody_length_m = 0.0\n", "depth.scale"),
+        ] {
+            let e = parse(text).err();
+            assert_eq!(e.as_ref().and_then(|e| e.key()), Some(key), "{text}: {e:?}");
+        }
+        // The tracker checks itself as it is read; built in code, its check still names the key.
+        let c =
+            Config { tracker: TrackerConfig { det_threshold: f64::NAN, ..Default::default() }, ..Default::default() };
+        assert_eq!(c.validate().map_err(|e| e.key), Err("tracker.det_threshold".to_string()));
     }
 
     #[test]

@@ -152,8 +152,8 @@ pub fn range_of(key: &str) -> Option<&'static Range> {
 }
 
 /// Checks every ranged key of `doc` (the configuration as a TOML value); the first one out of
-/// range is the error, as (dotted key, message).
-pub fn check(doc: &toml::Value) -> Result<(), (String, String)> {
+/// range is the error.
+pub fn check(doc: &toml::Value) -> Result<(), super::KeyError> {
     for range in RANGES {
         let Some(v) = lookup(doc, range.key) else { continue };
         let Some(x) = v.as_float().or_else(|| v.as_integer().map(|i| i as f64)) else { continue };
@@ -164,7 +164,7 @@ pub fn check(doc: &toml::Value) -> Result<(), (String, String)> {
             } else {
                 format!("{x}")
             };
-            return Err((range.key.to_string(), format!("must be {}, got {got}", range.describe())));
+            return Err(super::KeyError::new(range.key, format!("must be {}, got {got}", range.describe())));
         }
     }
     Ok(())
@@ -231,6 +231,6 @@ mod tests {
             ..Default::default()
         })
         .expect("serializes");
-        assert_eq!(check(&doc).map_err(|(_, m)| m), Err("must be 0.1..=86400 s, got 1e20".to_string()));
+        assert_eq!(check(&doc).map_err(|e| e.message), Err("must be 0.1..=86400 s, got 1e20".to_string()));
     }
 }

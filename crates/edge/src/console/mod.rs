@@ -8,6 +8,7 @@
 //! `counters`, `log [n]`, `history [hours]`, `stream on|off`, `config`, `snap`, `record`,
 //! `record save [label]` (docs/recording.md).
 
+pub mod config;
 pub mod tracks;
 pub mod writer;
 

@@ -17,6 +17,7 @@
 //! [`RETRY_MIN`] to [`RETRY_MAX`], so the history resumes within seconds of space coming back,
 //! with the rows of the pause; the registers are never affected.
 
+pub mod config;
 pub mod plot;
 
 use crate::status::{HistoryStatus, Shared};

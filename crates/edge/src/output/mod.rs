@@ -5,6 +5,7 @@
 //! I/O; [`modbus`] and the serial line are the I/O edges around the shared [`bank::RegisterBank`].
 
 pub mod bank;
+pub mod config;
 pub mod feeding;
 pub mod listen_hint;
 pub mod log_throttle;

@@ -15,6 +15,7 @@
 //! (bit 7, console `record`) and pauses recording, retried with backoff (1 s doubling to 30 s);
 //! the activity index keeps flowing to the outputs.
 
+pub mod config;
 pub mod freeze;
 mod overlays;
 pub mod ring;

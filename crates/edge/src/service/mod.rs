@@ -14,6 +14,7 @@
 //!
 //! [`build_pipeline`] returns the pipeline `fme run` uses ([`fme_core::pipeline::FishPipeline`]).
 
+pub mod config;
 pub mod publish;
 pub mod signals;
 pub mod timing;
