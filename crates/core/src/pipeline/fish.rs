@@ -19,13 +19,13 @@ use super::substitute::Substitute;
 use super::{ActivitySample, Calibration, Frame, FrameOutcome, Pipeline, PipelineError, QualityFlags, StageHealth};
 use crate::familiarity::FamiliarityMonitor;
 use crate::geometry::{Camera, PixelBox};
-use crate::infer::{self, DepthNet, Detector, InferSchedule, RgbFrame};
+use crate::infer::{self, DepthNet, Detector, FramePlan, InferSchedule, RgbFrame};
 use crate::metric::{
     DepthGrid, MapKind, ReferenceFootprints, ReferencePoints, ScaleConfig, ScalePolicy, ScaleSource, sample_fish,
 };
-use crate::motion::{ActivityEstimator, Fish, Observation};
+use crate::motion::{ActivityEstimator, Fish, Observation, SwarmEstimate};
 use crate::track::{self, Tracker};
-use crate::units::{Metres, MetresPerSecond};
+use crate::units::{Metres, MetresPerSecond, Seconds};
 
 /// Detector + tracker + depth + metric fit + post-processing + motion.
 pub struct FishPipeline {
@@ -184,6 +184,102 @@ impl FishPipeline {
         self.familiarity.reset();
     }
 
+    /// Runs the networks `plan` asks for (the detector unless tracks are given), decoding the frame
+    /// once and only when one of them runs.
+    fn run_networks(&mut self, frame: &Frame, plan: FramePlan, tracks_given: bool) -> Result<(), PipelineError> {
+        let net_runs = (plan.detect && self.detector.is_some()) || (plan.depth && self.depth.is_some());
+        let mut rgb_buf = std::mem::take(&mut self.rgb);
+        let result = (|| {
+            let rgb = if net_runs {
+                let (w, h) = frame
+                    .to_rgb_into(&mut rgb_buf)
+                    .map_err(|message| PipelineError::Decode { seq: frame.seq, message })?;
+                Some(
+                    RgbFrame::new(w, h, &rgb_buf)
+                        .map_err(|e| PipelineError::Decode { seq: frame.seq, message: e.to_string() })?,
+                )
+            } else {
+                None
+            };
+            if plan.detect && !tracks_given {
+                self.detect(frame, rgb.as_ref())?;
+            }
+            if plan.depth {
+                self.depth_frame(frame, rgb.as_ref())?;
+            }
+            Ok::<(), PipelineError>(())
+        })();
+        self.rgb = rgb_buf;
+        result
+    }
+
+    /// The tracked boxes that enter the estimator: the tracker's confirmed tracks, or the given ones.
+    fn observe(&mut self, frame: &Frame, tracks_given: bool) -> Result<(), PipelineError> {
+        self.obs.clear();
+        if tracks_given {
+            if let Some(s) = self.substitute.as_mut() {
+                self.given.clear();
+                s.tracks(frame, &mut self.given)
+                    .map_err(|message| PipelineError::Stage { stage: "tracks", message })?;
+                self.obs.extend(self.given.iter().map(|&(id, bbox)| Observation { id, bbox, depth: None }));
+            }
+        } else {
+            self.obs.extend(self.tracker.confirmed().map(|o| Observation { id: o.id, bbox: o.bbox, depth: None }));
+        }
+        self.health.tracks = self.obs.len() as u32;
+        self.health.detector_hz = self.det_rate.hz();
+        self.health.depth_hz = self.depth_rate.hz();
+        Ok(())
+    }
+
+    /// Eq. 5 on this frame's observations, with each fish's depth read at its corrected box, and the
+    /// sample the outputs publish.
+    fn estimate(&mut self, t: Seconds) -> (SwarmEstimate, ActivitySample) {
+        // On the fish's scale with the configured length, every fish is as long as the ruler
+        // (`ActivityEstimator::set_ruler_length`). With a length measured under the references the
+        // fit carries their scale on, and the lengths measured under it with it.
+        let state = self.scale.state();
+        let ruler =
+            (state.source == ScaleSource::Fish && !state.ruler_length_learned).then_some(Metres(state.ruler_length_m));
+        self.estimator.set_ruler_length(ruler);
+        // Field by field, so the estimator can be borrowed mutably beside it.
+        let view = depth_view(&self.depth, &self.substitute);
+        let (fit, how, obs) = (self.scale.fit(), self.cfg.depth.sample, &self.obs);
+        let s = self.estimator.update_with(t, obs, |o, px| {
+            let view = view?;
+            let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
+            let others = obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox);
+            let r = sample_fish(how, view.kind(), &b, others, || view.point(px), |p| view.grid(p))?;
+            match view.kind() {
+                MapKind::Depth => Some(Metres(r)),
+                MapKind::InverseDepth => fit?.depth(r),
+            }
+        });
+        let metric = self.scale.fit().is_some() || view.is_some_and(|v| v.kind() == MapKind::Depth);
+        let mean = s.mean.map_or(f64::NAN, |m| m.0);
+        let bls = match self.cfg.motion.body_length() {
+            Some(l) => mean / l.0,
+            None => s.mean_bls.unwrap_or(f64::NAN),
+        };
+        let sample = ActivitySample {
+            timestamp: t,
+            mean: MetresPerSecond(mean),
+            mean_body_lengths: bls,
+            smoothed: MetresPerSecond(s.smoothed.map_or(f64::NAN, |m| m.0)),
+            ci95_half: MetresPerSecond(s.ci95.map_or(f64::NAN, |(lo, hi)| 0.5 * (hi.0 - lo.0))),
+            fish: s.n_fish as u32,
+            latency: s.latency,
+            flags: QualityFlags {
+                too_few_fish: (s.n_fish as u32) < self.cfg.motion.min_fish,
+                unfitted: !metric,
+                stale: false,
+                unlike_fish: self.familiarity.unlike_fish(),
+            },
+            scale: state.source,
+        };
+        (s, sample)
+    }
+
     /// Runs the detector, or takes the substitute's detections, and updates the tracker.
     fn detect(&mut self, frame: &Frame, rgb: Option<&RgbFrame<'_>>) -> Result<(), PipelineError> {
         let t = frame.timestamp;
@@ -302,88 +398,9 @@ impl Pipeline for FishPipeline {
         if !tracks_given {
             self.tracker.predict(t).map_err(|e| PipelineError::Stage { stage: "tracker", message: e.to_string() })?;
         }
-        // Decode only when a network runs on this frame.
-        let net_runs = (plan.detect && self.detector.is_some()) || (plan.depth && self.depth.is_some());
-        let mut rgb_buf = std::mem::take(&mut self.rgb);
-        let result = (|| {
-            let rgb = if net_runs {
-                let (w, h) = frame
-                    .to_rgb_into(&mut rgb_buf)
-                    .map_err(|message| PipelineError::Decode { seq: frame.seq, message })?;
-                Some(
-                    RgbFrame::new(w, h, &rgb_buf)
-                        .map_err(|e| PipelineError::Decode { seq: frame.seq, message: e.to_string() })?,
-                )
-            } else {
-                None
-            };
-            if plan.detect && !tracks_given {
-                self.detect(frame, rgb.as_ref())?;
-            }
-            if plan.depth {
-                self.depth_frame(frame, rgb.as_ref())?;
-            }
-            Ok::<(), PipelineError>(())
-        })();
-        self.rgb = rgb_buf;
-        result?;
-        self.obs.clear();
-        if tracks_given {
-            if let Some(s) = self.substitute.as_mut() {
-                self.given.clear();
-                s.tracks(frame, &mut self.given)
-                    .map_err(|message| PipelineError::Stage { stage: "tracks", message })?;
-                self.obs.extend(self.given.iter().map(|&(id, bbox)| Observation { id, bbox, depth: None }));
-            }
-        } else {
-            self.obs.extend(self.tracker.confirmed().map(|o| Observation { id: o.id, bbox: o.bbox, depth: None }));
-        }
-        self.health.tracks = self.obs.len() as u32;
-        self.health.detector_hz = self.det_rate.hz();
-        self.health.depth_hz = self.depth_rate.hz();
-        // On the fish's scale with the configured length, every fish is as long as the ruler
-        // (`ActivityEstimator::set_ruler_length`). With a length measured under the references the
-        // fit carries their scale on, and the lengths measured under it with it.
-        let state = self.scale.state();
-        let ruler =
-            (state.source == ScaleSource::Fish && !state.ruler_length_learned).then_some(Metres(state.ruler_length_m));
-        self.estimator.set_ruler_length(ruler);
-        // Field by field, so the estimator can be borrowed mutably beside it.
-        let view = depth_view(&self.depth, &self.substitute);
-        let (fit, how, obs) = (self.scale.fit(), self.cfg.depth.sample, &self.obs);
-        let s = self.estimator.update_with(t, obs, |o, px| {
-            let view = view?;
-            let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
-            let others = obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox);
-            let r = sample_fish(how, view.kind(), &b, others, || view.point(px), |p| view.grid(p))?;
-            match view.kind() {
-                MapKind::Depth => Some(Metres(r)),
-                MapKind::InverseDepth => fit?.depth(r),
-            }
-        });
-        let metric = self.scale.fit().is_some() || view.is_some_and(|v| v.kind() == MapKind::Depth);
-        let mean = s.mean.map_or(f64::NAN, |m| m.0);
-        let ci95_half = s.ci95.map_or(f64::NAN, |(lo, hi)| 0.5 * (hi.0 - lo.0));
-        let bls = match self.cfg.motion.body_length() {
-            Some(l) => mean / l.0,
-            None => s.mean_bls.unwrap_or(f64::NAN),
-        };
-        let sample = ActivitySample {
-            timestamp: t,
-            mean: MetresPerSecond(mean),
-            mean_body_lengths: bls,
-            smoothed: MetresPerSecond(s.smoothed.map_or(f64::NAN, |m| m.0)),
-            ci95_half: MetresPerSecond(ci95_half),
-            fish: s.n_fish as u32,
-            latency: s.latency,
-            flags: QualityFlags {
-                too_few_fish: (s.n_fish as u32) < self.cfg.motion.min_fish,
-                unfitted: !metric,
-                stale: false,
-                unlike_fish: self.familiarity.unlike_fish(),
-            },
-            scale: state.source,
-        };
+        self.run_networks(frame, plan, tracks_given)?;
+        self.observe(frame, tracks_given)?;
+        let (estimate, sample) = self.estimate(t);
         self.fish.clear();
         self.fish.extend(self.estimator.tracks());
         Ok(FrameOutcome {
@@ -392,7 +409,7 @@ impl Pipeline for FishPipeline {
             detections: if plan.detect { &self.dets } else { &[] },
             observations: &self.obs,
             fish: &self.fish,
-            estimate: s,
+            estimate,
             sample: Some(sample),
             fit: self.scale.state(),
             fit_stats: self.scale.stats(),
