@@ -1,4 +1,4 @@
-//! ONNX Runtime against tract (issue 36), in one run so that the ratios do not depend on how fast
+//! ONNX Runtime against tract, in one run so that the ratios do not depend on how fast
 //! the shared machine is today: per-inference time of the detector and the depth network
 //! (preprocess + runtime + decode, one thread, a frame of the bundled recording), int8 and fp32;
 //! and the pipeline's CPU at 30 fps (detector 10 Hz, depth 5 Hz, tracker, metric fit, eq. 1-5 over

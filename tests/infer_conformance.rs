@@ -1,4 +1,4 @@
-//! Conformance with real model exports (issue 5): YOLO11n (Ultralytics export) and Depth Anything
+//! Conformance with real model exports: YOLO11n (Ultralytics export) and Depth Anything
 //! V2 Small (transformers), random weights. The models are large, so they are not in the
 //! repository: `bash scripts/onnx_conformance.sh` exports them with the pinned Python stack and then
 //! runs these tests with `--ignored`. FME_CONFORMANCE_DIR points at the exports.
