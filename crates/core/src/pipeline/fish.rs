@@ -170,8 +170,8 @@ impl FishPipeline {
     }
 
     /// The depth map the pipeline samples now: the network's last map, or the substitute's.
-    fn depth_view(&self) -> Option<&dyn DepthGrid> {
-        depth_view(&self.depth, &self.substitute)
+    fn sampled_map(&self) -> Option<&dyn DepthGrid> {
+        sampled_map(&self.depth, &self.substitute)
     }
 
     /// Starts over after time went backwards (camera restarted): tracks, speeds and schedules are
@@ -243,19 +243,19 @@ impl FishPipeline {
             (state.source == ScaleSource::Fish && !state.ruler_length_learned).then_some(Metres(state.ruler_length_m));
         self.estimator.set_ruler_length(ruler);
         // Field by field, so the estimator can be borrowed mutably beside it.
-        let view = depth_view(&self.depth, &self.substitute);
+        let map = sampled_map(&self.depth, &self.substitute);
         let (fit, how, obs) = (self.scale.fit(), self.cfg.depth.sample, &self.obs);
         let s = self.estimator.update_with(t, obs, |o, px| {
-            let view = view?;
+            let map = map?;
             let b = PixelBox::from_center(px, o.bbox.w, o.bbox.h);
             let others = obs.iter().filter(|x| x.id != o.id).map(|x| &x.bbox);
-            let r = sample_fish(how, view.kind(), &b, others, || view.point(px), |p| view.grid(p))?;
-            match view.kind() {
+            let r = sample_fish(how, map.kind(), &b, others, || map.point(px), |p| map.grid(p))?;
+            match map.kind() {
                 MapKind::Depth => Some(Metres(r)),
                 MapKind::InverseDepth => fit?.depth(r),
             }
         });
-        let metric = self.scale.fit().is_some() || view.is_some_and(|v| v.kind() == MapKind::Depth);
+        let metric = self.scale.fit().is_some() || map.is_some_and(|v| v.kind() == MapKind::Depth);
         let mean = s.mean.map_or(f64::NAN, |m| m.0);
         let bls = match self.cfg.motion.body_length() {
             Some(l) => mean / l.0,
@@ -338,7 +338,7 @@ impl FishPipeline {
         self.depth_rate.record(frame.timestamp.0);
         self.health.depth_runs += 1;
         // Field by field: the policy reads the map, the references and the estimator's fish.
-        if let Some(map) = depth_view(&self.depth, &self.substitute) {
+        if let Some(map) = sampled_map(&self.depth, &self.substitute) {
             let fish = self.estimator.tracks().map(|f| (f.id, f.bbox, f.last_seen.0));
             let intrinsics = self.estimator.camera().intrinsics;
             self.scale.refit(frame.timestamp.0, map, &self.refs, &intrinsics, fish);
@@ -348,7 +348,7 @@ impl FishPipeline {
 }
 
 /// The depth map sampled now: the network's last map, or the substitute's.
-fn depth_view<'a>(net: &'a Option<DepthNet>, sub: &'a Option<Box<dyn Substitute>>) -> Option<&'a dyn DepthGrid> {
+fn sampled_map<'a>(net: &'a Option<DepthNet>, sub: &'a Option<Box<dyn Substitute>>) -> Option<&'a dyn DepthGrid> {
     match (net, sub) {
         (Some(net), _) => net.last_map().map(|m| m as &dyn DepthGrid),
         (None, Some(s)) => s.depth(),
@@ -427,9 +427,9 @@ impl Pipeline for FishPipeline {
         out.clear();
         // Each reference with the fit's residual there (eq. 1-2): which one was measured wrong or
         // is fouled shows at a glance.
-        let (view, fit) = (self.depth_view(), self.scale.fit());
+        let (map, fit) = (self.sampled_map(), self.scale.fit());
         out.extend(self.refs.iter().map(|(px, depth)| {
-            let fitted = match view {
+            let fitted = match map {
                 Some(v) if v.kind() == MapKind::Depth => v.point(px).map(Metres),
                 Some(v) => v.point(px).and_then(|r| fit?.depth(r)),
                 None => None,
@@ -439,9 +439,9 @@ impl Pipeline for FishPipeline {
     }
 
     fn depth_grid(&self, size: (u32, u32), grid: (u32, u32), out: &mut Vec<f32>) -> bool {
-        let Some(view) = self.depth_view() else { return false };
+        let Some(map) = self.sampled_map() else { return false };
         let fit = self.scale.fit();
-        if view.kind() == MapKind::InverseDepth && fit.is_none() {
+        if map.kind() == MapKind::InverseDepth && fit.is_none() {
             return false;
         }
         out.clear();
@@ -449,7 +449,7 @@ impl Pipeline for FishPipeline {
         for r in 0..grid.1 {
             for c in 0..grid.0 {
                 let px = crate::geometry::Pixel { u: (f64::from(c) + 0.5) * cw, v: (f64::from(r) + 0.5) * ch };
-                let d = view.grid(px).and_then(|x| match view.kind() {
+                let d = map.grid(px).and_then(|x| match map.kind() {
                     MapKind::Depth => Some(x),
                     MapKind::InverseDepth => fit.and_then(|f| f.depth(x)).map(|m| m.0),
                 });

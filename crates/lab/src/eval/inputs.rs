@@ -60,19 +60,19 @@ impl DepthGrid for GtMap {
                 let r = sample_relative(&p, &self.map, self.frame, px, GT_WINDOW)?;
                 Some(if self.fouled.contains(&px) { 1.5 * r } else { r })
             }
-            _ => sample_median(&self.view(), px, GT_WINDOW, |_| true),
+            _ => sample_median(&self.metres_map(), px, GT_WINDOW, |_| true),
         }
     }
     fn grid(&self, px: Pixel) -> Option<f64> {
         match self.input {
             DepthInput::Relative(p) => relative_at(&p, &self.map, self.frame, px),
-            _ => self.view().at(px),
+            _ => self.metres_map().at(px),
         }
     }
 }
 
 impl GtMap {
-    fn view(&self) -> RelativeMap<'_> {
+    fn metres_map(&self) -> RelativeMap<'_> {
         RelativeMap { data: &self.metres, width: self.map.width as usize, height: self.map.height as usize }
     }
 }
