@@ -4,9 +4,10 @@
 //! [`FishPipeline`] is the chain `fme run` ships: detector and depth network at reduced rates on
 //! frame time, tracker, metric fit on the reference objects (eq. 1-2), post-processing (eq. 3-4) and
 //! motion (eq. 5). `fme eval` drives the same type over a recording, with ground truth swapped in
-//! for a stage where asked ([`Substitute`]) and scoring taps on its outputs, so what it scores is
-//! what the PLC receives. The daemon (capture, queues, outputs, console, watchdog) only knows the
-//! [`Pipeline`] trait.
+//! for a stage where asked ([`Substitute`]), and scores what each frame returns: one
+//! [`FrameOutcome`], the same value the daemon publishes from, so what it scores is what the PLC
+//! receives. The daemon (capture, queues, outputs, console, watchdog) only knows the [`Pipeline`]
+//! trait.
 //!
 //! Errors from a stage are returned as [`PipelineError::Stage`] (the service counts and logs them and
 //! keeps going; a panic inside `process` is caught and counted the same way).
