@@ -4,7 +4,7 @@
 //! `cargo bench --bench history [DIR]` (or `make bench-history`); DIR (default: a temporary
 //! directory) should be on the disk the box writes to.
 
-use fme::history::{DayWriter, Row, format_row};
+use fme::history::{DayWriter, HistoryRow, format_row};
 use std::hint::black_box;
 use std::time::Instant;
 

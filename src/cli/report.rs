@@ -72,7 +72,7 @@ pub fn parse_when(flag: &str, s: &str, tz: &TimeZone) -> Result<i64, String> {
 struct Selection {
     /// The first line of the text (what was read).
     text: String,
-    rows: Vec<history::Row>,
+    rows: Vec<history::HistoryRow>,
     torn: usize,
     hours_from: i64,
     hours: usize,
@@ -185,7 +185,7 @@ pub fn run(a: ReportArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::history::Row;
+    use crate::history::HistoryRow;
 
     const H: i64 = 3_600_000;
 

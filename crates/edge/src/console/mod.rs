@@ -11,8 +11,8 @@
 pub mod writer;
 
 use crate::output::bank::RegisterBank;
-use crate::output::registers::{self, BLOCK_LEN, status};
-use crate::status::Shared;
+use crate::output::registers::{self, BLOCK_LEN};
+use crate::status::{FaultCode, Shared};
 use std::fmt::Write as _;
 use std::time::Duration;
 
@@ -97,34 +97,33 @@ pub struct Session {
 /// Track rows the pipeline lists for `tracks` at each update, at most.
 pub const TRACK_ROWS: usize = 64;
 
-/// A decoded float32 of the block at `at`, 3 decimals, `-` when unavailable.
-fn float_at(r: &[u16; BLOCK_LEN], at: usize, order: crate::config::WordOrder, decimals: usize) -> String {
-    let v = registers::decode_f32([r[at], r[at + 1]], order);
+/// `v` as the registers carry it (float32), `decimals` decimals, `-` when unavailable.
+fn float_text(v: f64, decimals: usize) -> String {
+    let v = v as f32;
     if v.is_finite() { format!("{v:.decimals$}") } else { "-".into() }
 }
 
 /// One-line activity summary (console `activity`, `stream`, the live view). Every value and flag
-/// comes from one published register block, so a value and the flags beside it are of the same
-/// update (the PLC's view); a fault ([`crate::status::is_fault_code`]) is named at the end.
-pub fn activity_line(shared: &Shared, bank: &RegisterBank) -> String {
-    let r = bank.block();
-    let order = shared.word_order();
-    let mean = registers::decode_f32([r[0], r[1]], order);
+/// comes from one published update, so a value and the flags beside it are of the same update
+/// (the PLC's view); a fault ([`crate::status::FaultCode::is_fault`]) is named at the end.
+pub fn activity_line(_shared: &Shared, bank: &RegisterBank) -> String {
+    let u = bank.update();
+    let fish = u.fish.min(u32::from(u16::MAX));
+    let mean = u.mean_mps as f32;
     let mut line = if mean.is_finite() {
         format!(
-            "activity {mean:.3} m/s ({} BL/s) smoothed {} m/s ±{} fish {} hb {} {}",
-            float_at(&r, 2, order, 2),
-            float_at(&r, 4, order, 3),
-            float_at(&r, 6, order, 3),
-            r[8],
-            r[12],
-            status::words(r[10])
+            "activity {mean:.3} m/s ({} BL/s) smoothed {} m/s ±{} fish {fish} hb {} {}",
+            float_text(u.mean_bls, 2),
+            float_text(u.smoothed_mps, 3),
+            float_text(u.ci95_half_mps, 3),
+            u.heartbeat,
+            u.status.words()
         )
     } else {
-        format!("activity n/a fish {} hb {} {}", r[8], r[12], status::words(r[10]))
+        format!("activity n/a fish {fish} hb {} {}", u.heartbeat, u.status.words())
     };
-    if crate::status::is_fault_code(r[11]) {
-        let _ = write!(line, " fault {}", crate::status::fault_name(r[11]));
+    if u.fault.is_fault() {
+        let _ = write!(line, " fault {}", u.fault.name());
     }
     line
 }
@@ -274,20 +273,20 @@ last {}",
                 Ok(())
             }
             ("status", None, _) => {
-                let r = bank.block();
+                let u = bank.update();
                 let h = shared.health();
                 let _ = write!(
                     body,
                     "state {}\nstatus 0x{:04x} {}\nfault {} ({}{})\nsource {}\nuptime {} s\nfeeding-recommended {}\ndetections {}\nhistory {}\nmodbus {}\nmetrics {}",
                     if shared.stopping() { "stopping" } else { "running" },
-                    r[10],
-                    status::words(r[10]),
-                    r[11],
-                    crate::status::fault_name(r[11]),
-                    if r[11] != 0 && !crate::status::is_fault_code(r[11]) { ", not a fault" } else { "" },
+                    u.status.bits(),
+                    u.status.words(),
+                    u.fault as u16,
+                    u.fault.name(),
+                    if u.fault != FaultCode::None && !u.fault.is_fault() { ", not a fault" } else { "" },
                     h.source,
                     h.started.elapsed().as_secs(),
-                    r[17],
+                    u8::from(u.feeding),
                     h.stage.familiarity.describe(),
                     shared.history.describe(),
                     shared.modbus.get().map_or("off", String::as_str),
@@ -485,7 +484,7 @@ pub fn serve(port: &mut serialport::TTYPort, shared: &Shared, bank: &RegisterBan
     let mut session = Session { echo, ..Session::default() };
     let mut buf = [0u8; 256];
     let mut out = String::with_capacity(1024);
-    let mut last_hb = bank.block()[12];
+    let mut last_hb = bank.update().heartbeat;
     let mut stalled = false;
     output.push(b"fme console ready (type help)\r\n");
     while !shared.stopping() {
@@ -496,7 +495,7 @@ pub fn serve(port: &mut serialport::TTYPort, shared: &Shared, bank: &RegisterBan
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
             Err(e) => return Err(e),
         }
-        let hb = bank.block()[12];
+        let hb = bank.update().heartbeat;
         if session.stream && hb != last_hb {
             // Do not split what the technician is typing: new line, the update, then redraw the input.
             let partial = session.partial_echo().map(str::to_owned);
@@ -713,7 +712,7 @@ record
         let mut w = crate::history::DayWriter::new(dir.path(), 30, 0.0);
         // One row a second for the last 10 minutes: 0.1 m/s, feeding for all of them.
         for i in 0..600 {
-            let r = crate::history::Row {
+            let r = crate::history::HistoryRow {
                 unix_ms: now - (600 - i) * 1000,
                 activity_mps: 0.1,
                 smoothed_mps: 0.1,

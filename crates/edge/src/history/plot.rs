@@ -2,7 +2,7 @@
 //! interval band and the smoothed value, the feeding thresholds, the fish count, feeding recommended
 //! and fault codes, against local time (the box's zone or `--tz`).
 
-use super::Row;
+use super::HistoryRow;
 use jiff::tz::TimeZone;
 use plotters::prelude::*;
 use std::path::Path;
@@ -56,7 +56,7 @@ impl Ranged for Ticked {
 
 /// Runs of consecutive rows with no gap longer than `gap_ms` between them (the daemon was down in
 /// a gap: lines are not drawn across it).
-fn runs(rows: &[Row], gap_ms: i64) -> Vec<&[Row]> {
+fn runs(rows: &[HistoryRow], gap_ms: i64) -> Vec<&[HistoryRow]> {
     let mut out = Vec::new();
     let mut start = 0;
     for i in 1..=rows.len() {
@@ -71,13 +71,13 @@ fn runs(rows: &[Row], gap_ms: i64) -> Vec<&[Row]> {
 }
 
 /// The fault a row shows in red: its code when it is a fault ([`crate::status::is_fault_code`]).
-fn fault_of(r: &Row) -> Option<u16> {
+fn fault_of(r: &HistoryRow) -> Option<u16> {
     crate::status::is_fault_code(r.fault).then_some(r.fault)
 }
 
 /// Runs of rows where `key` gives the same `Some` value, as (first ms, last ms, value); a one-row
 /// run gets one minute so that it shows.
-fn spans(rows: &[Row], gap_ms: i64, key: impl Fn(&Row) -> Option<u16>) -> Vec<(i64, i64, u16)> {
+fn spans(rows: &[HistoryRow], gap_ms: i64, key: impl Fn(&HistoryRow) -> Option<u16>) -> Vec<(i64, i64, u16)> {
     let mut out: Vec<(i64, i64, u16)> = Vec::new();
     let mut prev: Option<(i64, u16)> = None;
     for r in rows {
@@ -158,7 +158,7 @@ pub fn count_ticks(max: u32) -> Vec<f64> {
 
 /// Draws `rows` (sorted by time) titled `title` to `path`. Errors are plotters' or the file's, as
 /// text.
-pub fn plot_day(path: &Path, title: &str, rows: &[Row], o: &PlotOptions) -> Result<(), String> {
+pub fn plot_day(path: &Path, title: &str, rows: &[HistoryRow], o: &PlotOptions) -> Result<(), String> {
     crate::draw::register_plot_font();
     let e = |x: &dyn std::fmt::Display| format!("{}: {x}", path.display());
     let mut dts: Vec<i64> = rows.windows(2).map(|w| w[1].unix_ms - w[0].unix_ms).filter(|d| *d > 0).collect();
@@ -167,7 +167,7 @@ pub fn plot_day(path: &Path, title: &str, rows: &[Row], o: &PlotOptions) -> Resu
     let (from, to) = (o.from_ms, o.to_ms.max(o.from_ms + 60_000));
     let x_of = |ms: i64| (ms - from) as f64 / 3_600_000.0;
     let x_end = x_of(to);
-    let rows: Vec<Row> = rows.iter().copied().filter(|r| (from..=to).contains(&r.unix_ms)).collect();
+    let rows: Vec<HistoryRow> = rows.iter().copied().filter(|r| (from..=to).contains(&r.unix_ms)).collect();
     let rows = rows.as_slice();
     let (ticks, with_date) = time_ticks(from, to, &o.tz);
     let xs: Vec<f64> = ticks.iter().map(|&t| x_of(t)).collect();
@@ -202,10 +202,10 @@ pub fn plot_day(path: &Path, title: &str, rows: &[Row], o: &PlotOptions) -> Resu
         .draw()
         .map_err(|x| e(&x))?;
     let band = RGBColor(160, 190, 240);
-    let valued: Vec<Row> = rows.iter().copied().filter(|r| r.activity_mps.is_finite()).collect();
+    let valued: Vec<HistoryRow> = rows.iter().copied().filter(|r| r.activity_mps.is_finite()).collect();
     let mut labelled = false;
     for run in runs(&valued, gap_ms) {
-        let with_ci: Vec<&Row> = run.iter().filter(|r| r.ci95_mps.is_finite()).collect();
+        let with_ci: Vec<&HistoryRow> = run.iter().filter(|r| r.ci95_mps.is_finite()).collect();
         if with_ci.len() >= 2 {
             let mut poly: Vec<(f64, f64)> =
                 with_ci.iter().map(|r| (x_of(r.unix_ms), (r.activity_mps + r.ci95_mps).min(v_max))).collect();
@@ -329,8 +329,8 @@ pub fn plot_day(path: &Path, title: &str, rows: &[Row], o: &PlotOptions) -> Resu
 mod tests {
     use super::*;
 
-    fn r(s: i64, fault: u16, feeding: bool) -> Row {
-        Row {
+    fn r(s: i64, fault: u16, feeding: bool) -> HistoryRow {
+        HistoryRow {
             unix_ms: s * 1000,
             activity_mps: 0.1,
             smoothed_mps: 0.1,
@@ -389,7 +389,7 @@ mod tests {
     #[test]
     fn feeding_thresholds_drawn_where_configured() {
         let dir = tempfile::tempdir().expect("tempdir");
-        let rows: Vec<Row> = (0..600).map(|i| r(i * 10, 0, i > 300)).collect();
+        let rows: Vec<HistoryRow> = (0..600).map(|i| r(i * 10, 0, i > 300)).collect();
         let count = |feeding: Option<(f64, f64)>, name: &str| {
             let path = dir.path().join(name);
             let o = PlotOptions { from_ms: 0, to_ms: 6_000_000, tz: TimeZone::UTC, feeding };

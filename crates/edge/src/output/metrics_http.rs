@@ -20,7 +20,7 @@
 
 use super::bank::RegisterBank;
 use super::log_throttle::LogThrottle;
-use super::metrics::{CONTENT_TYPE, Snapshot, render};
+use super::metrics::{CONTENT_TYPE, Scrape, render};
 use crate::backoff::Backoff;
 use crate::config::MetricsConfig;
 use crate::config::allow::AllowList;
@@ -328,8 +328,8 @@ async fn serve_connection(mut stream: tokio::net::TcpStream, ctx: Ctx, slot: Slo
         Err(_) => (408, false),
     };
     let out = if code == 200 {
-        let snap = Snapshot::take(&ctx.shared, &ctx.bank, ctx.stale_after);
-        response(200, &render(&snap), head_only)
+        let scrape = Scrape::take(&ctx.shared, &ctx.bank, ctx.stale_after);
+        response(200, &render(&scrape), head_only)
     } else {
         let body = match code {
             404 => "not found: the metrics are at /metrics\n",

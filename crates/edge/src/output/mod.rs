@@ -1,4 +1,4 @@
-//! Outputs to the farm: register map, Modbus TCP/RTU server and client, serial line, feeding rule,
+//! Outputs to the farm, each made from the one published [`Update`]: register map, Modbus TCP/RTU server and client, serial line, feeding rule,
 //! MQTT telemetry ([`mqtt`], docs/mqtt.md) and the Prometheus endpoint ([`metrics`], served by [`metrics_http`]).
 //!
 //! The register map ([`registers`]) and the feeding rule ([`feeding`]) are pure and tested without
@@ -17,3 +17,6 @@ pub mod registers;
 pub mod roles;
 pub mod serial_line;
 pub mod tcp_conns;
+pub mod update;
+
+pub use update::{StatusBits, Update};
