@@ -13,6 +13,7 @@ pub mod metrics_http;
 pub mod modbus;
 pub mod modbus_guard;
 pub mod mqtt;
+pub mod peer_limit;
 pub mod registers;
 pub mod roles;
 pub mod serial_line;
