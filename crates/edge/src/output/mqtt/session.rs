@@ -293,29 +293,13 @@ async fn session(
     let mut flush_deadline: Option<tokio::time::Instant> = None;
     let mut offline_sent = false;
     loop {
-        // Hand queued messages to the client, a few at a time.
         let closing_now = closing(inner, shared, stop_seen);
         if closing_now && flush_deadline.is_none() {
             flush_deadline = Some(tokio::time::Instant::now() + STOP_FLUSH);
         }
-        while in_flight.len() < MAX_IN_FLIGHT && !offline_sent {
-            let Some(q) = inner.queue().pop() else { break };
-            payload.clear();
-            let topic = match q.item {
-                Item::Activity { seq, update } => {
-                    activity_json(&s.box_id, seq, &update, &mut payload);
-                    &s.topics.activity
-                }
-                Item::Event { update, kind } => {
-                    event_json(&s.box_id, &update, kind, &mut payload);
-                    &s.topics.event
-                }
-            };
-            if client.try_publish(topic.as_str(), s.qos, false, payload.as_bytes().to_vec()).is_err() {
-                inner.queue().requeue_front(std::iter::once(q.item));
-                break;
-            }
-            in_flight.push_back(InFlight { pkid: None, msg: Some(q) });
+        // Hand queued messages to the client, a few at a time.
+        if !offline_sent {
+            hand_over(s, inner, &client, &mut in_flight, &mut payload);
         }
         books.sync(inner);
         if let Some(d) = flush_deadline
@@ -378,6 +362,36 @@ async fn session(
             () = inner.notify.notified() => {}
             () = tokio::time::sleep(Duration::from_millis(100)) => {}
         }
+    }
+}
+
+/// Hands queued messages to the client while fewer than [`MAX_IN_FLIGHT`] wait for their
+/// acknowledgement; one the client cannot take goes back in front of the queue.
+fn hand_over(
+    s: &Settings,
+    inner: &Inner,
+    client: &AsyncClient,
+    in_flight: &mut VecDeque<InFlight>,
+    payload: &mut String,
+) {
+    while in_flight.len() < MAX_IN_FLIGHT {
+        let Some(q) = inner.queue().pop() else { break };
+        payload.clear();
+        let topic = match q.item {
+            Item::Activity { seq, update } => {
+                activity_json(&s.box_id, seq, &update, payload);
+                &s.topics.activity
+            }
+            Item::Event { update, kind } => {
+                event_json(&s.box_id, &update, kind, payload);
+                &s.topics.event
+            }
+        };
+        if client.try_publish(topic.as_str(), s.qos, false, payload.as_bytes().to_vec()).is_err() {
+            inner.queue().requeue_front(std::iter::once(q.item));
+            break;
+        }
+        in_flight.push_back(InFlight { pkid: None, msg: Some(q) });
     }
 }
 
