@@ -1,8 +1,11 @@
-//! Outputs to the farm, each made from the one published [`Update`]: register map, Modbus TCP/RTU server and client, serial line, feeding rule,
-//! MQTT telemetry ([`mqtt`], docs/mqtt.md) and the Prometheus endpoint ([`metrics`], served by [`metrics_http`]).
+//! Outputs to the farm: register map, Modbus TCP/RTU server and client, serial line, feeding rule,
+//! MQTT telemetry ([`mqtt`], docs/mqtt.md) and the Prometheus endpoint ([`metrics`], served by
+//! [`metrics_http`]). Each reads the one published [`Update`], made once per update by the
+//! publisher; none decodes another's encoding.
 //!
 //! The register map ([`registers`]) and the feeding rule ([`feeding`]) are pure and tested without
 //! I/O; [`modbus`] and the serial line are the I/O edges around the shared [`bank::RegisterBank`].
+//! Both TCP servers (Modbus, metrics) limit connections per address with one [`peer_limit`].
 
 pub mod bank;
 pub mod feeding;

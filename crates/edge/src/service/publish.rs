@@ -158,8 +158,6 @@ impl Publisher {
         let ack = bank.writable()[usize::from(registers::HR_FEEDING_ACK - registers::HR_WRITABLE_START)];
         let u = shared.with_health(|h| {
             let u = self.update(h, link, ack, now, stopped);
-            h.fault = u.fault;
-            h.feeding = u.feeding;
             h.updates += 1;
             u
         });

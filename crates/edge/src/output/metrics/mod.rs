@@ -1,10 +1,11 @@
 //! The Prometheus endpoint (`[output.metrics]`, `docs/metrics.md`): a small HTTP/1.1 server that
 //! answers `GET /metrics` with the text exposition format 0.0.4.
 //!
-//! Each scrape renders a snapshot of [`Shared`] health and the [`RegisterBank`] counters; the
-//! pipeline never waits on it (a scrape holds the health lock only to copy the snapshot). The list
+//! Each scrape ([`Scrape`]) renders a copy of the [`Shared`] health, the last published update and
+//! the [`RegisterBank`] counters; the pipeline never waits on it (a scrape holds the health lock
+//! only to copy it). The list
 //! of metric families is [`families`] (one function per group): a new family is one call there (and
-//! one row in `docs/metrics.md`); the text format is [`exposition`].
+//! one row in `docs/metrics.md`); the text format is `exposition`.
 //!
 //! The HTTP server, its connection limits and its defences against a hostile LAN are in
 //! [`super::metrics_http`].

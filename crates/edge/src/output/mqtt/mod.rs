@@ -9,7 +9,7 @@
 //!         -> rumqttc (QoS 1: a message leaves the books only on the broker's PUBACK)
 //! ```
 //! Each connection attempt gets a fresh client whose event loop is polled without pause by a task
-//! of its own ([`Driver`]); the connection state, the connect timeout and the backoff live outside
+//! of its own (`session::Driver`); the connection state, the connect timeout and the backoff live outside
 //! it. rumqttc's `poll` is not cancel-safe while connecting: a poll dropped before the CONNACK (a
 //! `select!` against a timer) starts the TCP connection over, so over a slow link (CONNACK later
 //! than the timer) the box would never connect and would open a connection per tick.
@@ -19,8 +19,9 @@
 //! when the link dropped are sent again (QoS 1 is at least once). A refused login or a failed TLS
 //! handshake sets status bit 9 and is retried with backoff, logged at most once a minute.
 //!
-//! The JSON builders ([`payload`]), the event detector ([`events`]), the queue policy ([`queue`]) and
-//! the topic names are pure and tested without a broker; the connection is [`session`] (with [`tls`]); `tests/mqtt.rs` runs the whole thing against a real Mosquitto.
+//! The JSON builders (`payload`), the event detector (`events`), the queue policy (`queue`) and the
+//! topic names are pure and tested without a broker; the connection is `session` (options and TLS:
+//! `tls`); `tests/mqtt.rs` runs the whole thing against a real Mosquitto.
 
 mod events;
 mod payload;
