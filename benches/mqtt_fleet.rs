@@ -7,7 +7,7 @@
 //!
 //! `make bench-mqtt` (needs Debian's mosquitto: `make setup`). A benchmark, not a test.
 
-use fme::history::HistoryRow;
+use fme::output::{StatusBits, Update};
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};

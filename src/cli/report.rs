@@ -199,7 +199,7 @@ mod tests {
         for &(a, b) in spans {
             for t in (a..b).step_by(600_000) {
                 let text = files.entry(history::day_of(t)).or_insert_with(|| format!("{}\n", history::HEADER));
-                let r = Row {
+                let r = HistoryRow {
                     unix_ms: t,
                     activity_mps: 0.2,
                     smoothed_mps: 0.2,
