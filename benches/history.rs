@@ -4,13 +4,13 @@
 //! `cargo bench --bench history [DIR]` (or `make bench-history`); DIR (default: a temporary
 //! directory) should be on the disk the box writes to.
 
-use fme::history::{DayWriter, Row, format_row};
+use fme::history::{DayWriter, HistoryRow, format_row};
 use std::hint::black_box;
 use std::time::Instant;
 
-fn row(i: i64) -> Row {
+fn row(i: i64) -> HistoryRow {
     let v = 0.2 + 0.1 * ((i as f64) * 0.01).sin();
-    Row {
+    HistoryRow {
         unix_ms: 1_796_400_000_000 + i * 1000, // 1 Hz rows on 2026-12-04
         activity_mps: v,
         smoothed_mps: v * 0.95,

@@ -7,7 +7,7 @@
 //!
 //! `make bench-mqtt` (needs Debian's mosquitto: `make setup`). A benchmark, not a test.
 
-use fme::history::Row;
+use fme::output::{StatusBits, Update};
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -101,18 +101,16 @@ fn main() {
                 let mut n = 0u64;
                 for seq in 1..=secs {
                     tick.tick().await;
-                    let row = Row {
+                    let row = Update {
                         unix_ms: fme::history::now_unix_ms(),
-                        activity_mps: 0.1 + 0.001 * seq as f64,
+                        mean_mps: 0.1 + 0.001 * seq as f64,
                         smoothed_mps: 0.1,
-                        ci95_mps: 0.01,
-                        n_fish: 20,
-                        bls: 0.4,
-                        status: 0b1111,
-                        fault: 0,
-                        feeding: false,
+                        ci95_half_mps: 0.01,
+                        fish: 20,
+                        mean_bls: 0.4,
+                        status: StatusBits::from_word(0b1111),
                         scale: fme::pipeline::ScaleSource::References,
-                        unlike_fish: false,
+                        ..Update::default()
                     };
                     json.clear();
                     fme::output::mqtt::activity_json(&id, seq, &row, &mut json);

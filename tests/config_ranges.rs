@@ -55,9 +55,9 @@ fn build_and_run(cfg: &Config) -> Result<(), String> {
     let shared = Shared::new(String::new(), cfg.console.log_lines);
     let mut publisher = Publisher::new(cfg, &timing, Arc::new(RegisterBank::new()));
     let mut health = shared.health();
-    let _ = publisher.inputs(&health, false, 0, Instant::now(), false);
+    let _ = publisher.update(&health, false, 0, Instant::now(), false);
     health.last_sample_at = Some(Instant::now());
-    let _ = publisher.inputs(&health, true, 0, Instant::now() + Duration::from_secs(1), false);
+    let _ = publisher.update(&health, true, 0, Instant::now() + Duration::from_secs(1), false);
     let _ = publisher.publish(&shared, Instant::now(), false);
     let mut schedule = InferSchedule::new(cfg.detector.rate_hz, cfg.depth.rate_hz);
     let mut tracker = Tracker::new(cfg.tracker);

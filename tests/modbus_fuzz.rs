@@ -7,7 +7,7 @@
 
 use fme::output::bank::RegisterBank;
 use fme::output::modbus;
-use fme::output::registers::{self, RegisterInputs, status};
+use fme::output::registers::{self, StatusBits, Update};
 use fme::output::tcp_conns::TcpLimits;
 use std::sync::Arc;
 use std::time::Duration;
@@ -229,10 +229,10 @@ async fn read_answer(s: &mut TcpStream) -> Option<(u16, u8, Vec<u8>)> {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn fuzzed_frames_get_the_right_answers_and_never_panic() {
     let bank = Arc::new(RegisterBank::new());
-    let inp = RegisterInputs {
+    let inp = Update {
         mean_mps: 0.125,
         fish: 12,
-        status: status::RUNNING | status::CAMERA_OK,
+        status: StatusBits::RUNNING | StatusBits::CAMERA_OK,
         heartbeat: 42,
         feeding: true,
         ..Default::default()
@@ -350,7 +350,7 @@ async fn fuzzed_rtu_frames_get_the_right_answers() {
     const UNIT: u8 = 5;
     let bank = Arc::new(RegisterBank::new());
     let block = registers::encode(
-        &RegisterInputs { fish: 3, feeding: true, heartbeat: 9, ..Default::default() },
+        &Update { fish: 3, feeding: true, heartbeat: 9, ..Default::default() },
         fme::config::WordOrder::HighFirst,
     );
     bank.publish(block);

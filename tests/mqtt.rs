@@ -21,9 +21,8 @@ use delay_proxy::DelayProxy;
 use fme::backoff::Backoff;
 use fme::capture::{FrameSource, RecordedSource};
 use fme::config::Config;
-use fme::history::Row;
 use fme::output::mqtt::MqttSender;
-use fme::output::registers::status;
+use fme::output::{StatusBits, Update};
 use fme::pipeline::ScaleSource;
 use fme::service::{Daemon, RunOptions};
 use fme::status::{MqttLink, Shared};
@@ -578,8 +577,8 @@ async fn wrong_password_sets_bit_9_logs_once_backs_off_and_recovers() {
     assert_eq!(m.link, MqttLink::AuthFailed, "{m:?}");
     assert!((2..=8).contains(&m.connect_attempts), "backoff, no busy loop: {m:?}");
     let regs = read_regs(&mut ctx).await;
-    assert_ne!(regs[10] & status::TELEMETRY_FAULT, 0, "status bit 9 set");
-    assert_ne!(regs[10] & status::RUNNING, 0, "the daemon keeps running");
+    assert_ne!(regs[10] & StatusBits::TELEMETRY_FAULT.bits(), 0, "status bit 9 set");
+    assert_ne!(regs[10] & StatusBits::RUNNING.bits(), 0, "the daemon keeps running");
     let logs = shared.last_logs(200);
     let refused: Vec<_> = logs.iter().filter(|l| l.contains("refused the login")).collect();
     assert_eq!(refused.len(), 1, "one line, not one per attempt: {logs:?}");
@@ -594,7 +593,7 @@ async fn wrong_password_sets_bit_9_logs_once_backs_off_and_recovers() {
         shared.health().mqtt
     );
     tokio::time::sleep(Duration::from_millis(500)).await;
-    assert_eq!(read_regs(&mut ctx).await[10] & status::TELEMETRY_FAULT, 0, "bit 9 clears");
+    assert_eq!(read_regs(&mut ctx).await[10] & StatusBits::TELEMETRY_FAULT.bits(), 0, "bit 9 clears");
     daemon.shutdown().await;
 }
 
@@ -723,19 +722,17 @@ fn slow_link_config(port: u16, prefix: &str, box_id: &str, min_ms: u64, max_ms: 
 }
 
 /// One output update, stamped now.
-fn update() -> Row {
-    Row {
+fn update() -> Update {
+    Update {
         unix_ms: fme::history::now_unix_ms(),
-        activity_mps: 0.12,
+        mean_mps: 0.12,
         smoothed_mps: 0.11,
-        ci95_mps: 0.01,
-        n_fish: 9,
-        bls: 0.4,
-        status: status::RUNNING,
-        fault: 0,
-        feeding: false,
+        ci95_half_mps: 0.01,
+        fish: 9,
+        mean_bls: 0.4,
+        status: StatusBits::RUNNING,
         scale: ScaleSource::References,
-        unlike_fish: false,
+        ..Update::default()
     }
 }
 

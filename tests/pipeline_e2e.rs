@@ -169,7 +169,7 @@ fn missing_model_and_bad_calibration_are_named_at_start() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn daemon_with_the_real_pipeline_feeds_the_plc() {
     use fme::config::{ModbusMode, WordOrder};
-    use fme::output::registers::{decode_f32, status};
+    use fme::output::registers::{StatusBits, decode_f32};
     use fme::service::{Daemon, RunOptions};
     use std::time::Duration;
     use tokio_modbus::prelude::*;
@@ -186,7 +186,8 @@ async fn daemon_with_the_real_pipeline_feeds_the_plc() {
     tokio::time::sleep(Duration::from_millis(2500)).await;
     let r = plc.read_input_registers(0, 24).await.expect("transport").expect("exception");
     daemon.shutdown().await;
-    let bits = status::RUNNING | status::CAMERA_OK | status::DETECTOR_OK | status::DEPTH_CALIBRATED;
+    let bits =
+        (StatusBits::RUNNING | StatusBits::CAMERA_OK | StatusBits::DETECTOR_OK | StatusBits::DEPTH_CALIBRATED).bits();
     assert_eq!(r[10] & bits, bits, "status {:#06b}", r[10]);
     assert!(r[8] >= 5, "fish count {}", r[8]);
     let mean = decode_f32([r[0], r[1]], WordOrder::HighFirst);

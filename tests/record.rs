@@ -3,7 +3,7 @@
 
 use fme::capture::{FrameSource, RecordedSource};
 use fme::config::Config;
-use fme::output::registers::{decode_f32, status};
+use fme::output::registers::{StatusBits, decode_f32};
 use fme::service::{Daemon, RunOptions};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -240,8 +240,8 @@ async fn disk_full_pauses_recording_and_the_plc_values_keep_updating() {
     let log = String::from_utf8_lossy(&out.stderr);
     assert!(beats.last() > beats.first() && beats.windows(2).all(|w| w[1] >= w[0]), "heartbeat {beats:?}");
     assert!(means.len() >= 10 && means.windows(2).any(|w| w[0] != w[1]), "activity updates: {means:?}");
-    assert_ne!(bits & status::RECORD_FAULT, 0, "status bit 7: {bits:#06x}\n{log}");
-    assert_ne!(bits & status::CAMERA_OK, 0, "status {bits:#06x}");
+    assert_ne!(bits & StatusBits::RECORD_FAULT.bits(), 0, "status bit 7: {bits:#06x}\n{log}");
+    assert_ne!(bits & StatusBits::CAMERA_OK.bits(), 0, "status {bits:#06x}");
     assert_eq!(log.matches("recording paused").count(), 1, "logged once:\n{log}");
     assert!(out.status.success(), "clean exit on SIGTERM: {:?}\n{log}", out.status);
 }

@@ -72,7 +72,7 @@ pub fn parse_when(flag: &str, s: &str, tz: &TimeZone) -> Result<i64, String> {
 struct Selection {
     /// The first line of the text (what was read).
     text: String,
-    rows: Vec<history::Row>,
+    rows: Vec<history::HistoryRow>,
     torn: usize,
     hours_from: i64,
     hours: usize,
@@ -185,7 +185,7 @@ pub fn run(a: ReportArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::history::Row;
+    use crate::history::HistoryRow;
 
     const H: i64 = 3_600_000;
 
@@ -199,7 +199,7 @@ mod tests {
         for &(a, b) in spans {
             for t in (a..b).step_by(600_000) {
                 let text = files.entry(history::day_of(t)).or_insert_with(|| format!("{}\n", history::HEADER));
-                let r = Row {
+                let r = HistoryRow {
                     unix_ms: t,
                     activity_mps: 0.2,
                     smoothed_mps: 0.2,

@@ -153,23 +153,23 @@ async fn console_commands_and_fuzz() {
 /// rows it lists, `history` on a new box says there is none, `regs` decodes each register.
 #[test]
 fn each_view_shows_one_update_and_regs_are_decoded() {
-    use fme::output::registers::{self, RegisterInputs, status};
+    use fme::output::{StatusBits, Update};
     let (mut master, slave) = serialport::TTYPort::pair().expect("pty pair");
     master.set_timeout(Duration::from_millis(100)).expect("timeout");
     let shared = std::sync::Arc::new(fme::status::Shared::new(String::new(), 50));
     let bank = std::sync::Arc::new(fme::output::bank::RegisterBank::new());
     // The published update: 5 fish, too few of them, heartbeat 7.
-    let published = RegisterInputs {
+    let published = Update {
         mean_mps: 0.2,
         mean_bls: 0.8,
         smoothed_mps: 0.19,
         ci95_half_mps: 0.02,
         fish: 5,
-        status: status::RUNNING | status::CAMERA_OK | status::TOO_FEW_FISH,
+        status: StatusBits::RUNNING | StatusBits::CAMERA_OK | StatusBits::TOO_FEW_FISH,
         heartbeat: 7,
-        ..RegisterInputs::default()
+        ..Update::default()
     };
-    bank.publish(registers::encode(&published, fme::config::WordOrder::HighFirst));
+    bank.publish_update(&published, fme::config::WordOrder::HighFirst);
     // A newer frame the block does not hold yet (18 fish, no flag), and the track list of the last
     // update (3 rows) beside a per-frame count of 23.
     shared.with_health(|h| {

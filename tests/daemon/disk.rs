@@ -8,7 +8,7 @@
 use crate::support;
 
 use fme::capture::{FrameSource, RecordedSource};
-use fme::output::registers::status;
+use fme::output::registers::StatusBits;
 use fme::record::freeze::{self, FreezeInputs};
 use fme::record::ring::{Ring, RingEntry, fs_space};
 use fme::service::{Daemon, RunOptions};
@@ -192,12 +192,12 @@ async fn the_ring_on_a_3_mb_disk_keeps_its_reserve_and_keeps_recording() {
         h.record.frames_written
     );
     assert!(!h.record.disk_fault && h.record.write_errors == 0, "no pause: {:?}", h.record);
-    assert_eq!(bits & status::RECORD_FAULT, 0, "status bit 7 stays clear: {bits:#06x}");
+    assert_eq!(bits & StatusBits::RECORD_FAULT.bits(), 0, "status bit 7 stays clear: {bits:#06x}");
     assert!(hist1 > hist0, "the history keeps writing: {hist0} -> {hist1}");
 }
 
-fn row(unix_ms: i64) -> fme::history::Row {
-    fme::history::Row {
+fn row(unix_ms: i64) -> fme::history::HistoryRow {
+    fme::history::HistoryRow {
         unix_ms,
         activity_mps: 0.2,
         smoothed_mps: 0.2,
@@ -302,11 +302,13 @@ async fn a_stalled_write_raises_bit_7_and_shutdown_does_not_wait_for_it() {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     assert!(shared.health().record.frames_written >= 10, "the ring writes before the stall");
-    assert_eq!(daemon.bank().block()[10] & status::RECORD_FAULT, 0, "bit 7 clear on a working disk");
+    assert_eq!(daemon.bank().block()[10] & StatusBits::RECORD_FAULT.bits(), 0, "bit 7 clear on a working disk");
     let _thaw = Thaw;
     STALLED.store(true, Ordering::SeqCst);
     let (stalled, hb0) = (Instant::now(), daemon.bank().block()[12]);
-    while daemon.bank().block()[10] & status::RECORD_FAULT == 0 && stalled.elapsed() < Duration::from_secs(10) {
+    while daemon.bank().block()[10] & StatusBits::RECORD_FAULT.bits() == 0
+        && stalled.elapsed() < Duration::from_secs(10)
+    {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     let rise = stalled.elapsed();
@@ -315,7 +317,7 @@ async fn a_stalled_write_raises_bit_7_and_shutdown_does_not_wait_for_it() {
     let done = tokio::time::timeout(Duration::from_secs(10), daemon.shutdown()).await;
     let stop = t.elapsed();
     eprintln!("stalled write: bit 7 after {} ms, shutdown in {} ms", rise.as_millis(), stop.as_millis());
-    assert_ne!(block[10] & status::RECORD_FAULT, 0, "status bit 7 within 10 s: {:#06x}", block[10]);
+    assert_ne!(block[10] & StatusBits::RECORD_FAULT.bits(), 0, "status bit 7 within 10 s: {:#06x}", block[10]);
     assert!(rise <= Duration::from_secs(5), "bit 7 after {} ms", rise.as_millis());
     assert!(block[12].wrapping_sub(hb0) >= 10, "registers keep updating: heartbeat {hb0} -> {}", block[12]);
     assert!(done.is_ok() && stop <= Duration::from_secs(3), "shutdown with a write stuck took {} ms", stop.as_millis());

@@ -4,7 +4,7 @@ use crate::support;
 
 use fme::capture::{FrameSource, RecordedSource};
 use fme::config::WordOrder;
-use fme::output::registers::{FaultCode, decode_f32, join_u32, status};
+use fme::output::registers::{FaultCode, StatusBits, decode_f32, join_u32};
 use fme::service::{Daemon, RunOptions};
 use std::time::Duration;
 use tokio_modbus::prelude::*;
@@ -46,8 +46,11 @@ async fn recorded_sequence_to_modbus_client() {
     assert!(means.len() >= 10, "values must be available: {means:?}");
     assert!(means.iter().all(|m| (0.0..10.0).contains(m)), "plausible values: {means:?}");
     assert!(means.windows(2).any(|w| w[0] != w[1]), "values must change: {means:?}");
-    assert_eq!(last[10] & (status::RUNNING | status::CAMERA_OK), status::RUNNING | status::CAMERA_OK);
-    assert_ne!(last[10] & status::PLC_LINK_OK, 0, "we are polling: link bit set");
+    assert_eq!(
+        last[10] & ((StatusBits::RUNNING | StatusBits::CAMERA_OK).bits()),
+        (StatusBits::RUNNING | StatusBits::CAMERA_OK).bits()
+    );
+    assert_ne!(last[10] & StatusBits::PLC_LINK_OK.bits(), 0, "we are polling: link bit set");
     assert_eq!(last[11], FaultCode::None as u16);
     assert!(join_u32([last[13], last[14]], WordOrder::HighFirst) < 60);
     assert!((150..=450).contains(&last[15]), "camera fps x10 near 300: {}", last[15]);
@@ -60,7 +63,7 @@ async fn recorded_sequence_to_modbus_client() {
     for _ in 0..20 {
         tokio::time::sleep(Duration::from_millis(20)).await;
         if let Ok(Ok(Ok(r))) = tokio::time::timeout(Duration::from_millis(200), ctx.read_input_registers(0, 24)).await
-            && r[10] & status::RUNNING == 0
+            && r[10] & StatusBits::RUNNING.bits() == 0
         {
             assert_eq!(r[11], FaultCode::Stopped as u16);
             assert_eq!(r[17], 0, "no feeding recommendation when stopped");

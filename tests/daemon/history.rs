@@ -6,7 +6,7 @@
 use crate::support;
 
 use fme::capture::{FrameSource, RecordedSource};
-use fme::history::{self, DayWriter, Row};
+use fme::history::{self, DayWriter, HistoryRow};
 use fme::service::{Daemon, RunOptions};
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -48,7 +48,7 @@ fn history_rows_survive_sigkill_and_every_complete_row_reads() {
     child.kill().expect("SIGKILL");
     let status = child.wait().expect("wait");
     assert_eq!(std::os::unix::process::ExitStatusExt::signal(&status), Some(9), "killed, not exited: {status:?}");
-    let mut rows: Vec<Row> = Vec::new();
+    let mut rows: Vec<HistoryRow> = Vec::new();
     let mut files = 0;
     for e in std::fs::read_dir(&hist).expect("history dir").flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
@@ -124,7 +124,7 @@ async fn a_clean_start_and_stop_are_no_faults_anywhere() {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     daemon.shutdown().await;
-    let mut rows: Vec<Row> = Vec::new();
+    let mut rows: Vec<HistoryRow> = Vec::new();
     for e in std::fs::read_dir(&hist).expect("history dir").flatten() {
         rows.extend(history::read_day_file(&e.path()).unwrap_or_else(|err| panic!("{err}")).rows);
     }
@@ -133,7 +133,7 @@ async fn a_clean_start_and_stop_are_no_faults_anywhere() {
     assert_eq!(rows[0].fault, 0, "the first block, before the camera's first frame, is no camera fault");
     let last = rows[rows.len() - 1];
     assert_eq!(last.fault, 6, "the clean stop is the last row (fault code 6, stopped)");
-    assert_eq!(last.status & fme::output::registers::status::RUNNING, 0);
+    assert_eq!(last.status & fme::output::StatusBits::RUNNING.bits(), 0);
     let codes: Vec<u16> = rows.iter().map(|r| r.fault).collect();
     assert!(rows.iter().all(|r| !fme::status::is_fault_code(r.fault)), "no fault: {codes:?}");
     // The history summary (console `history`, `fme report`): no fault rows.
@@ -143,7 +143,14 @@ async fn a_clean_start_and_stop_are_no_faults_anywhere() {
     // MQTT: no fault event.
     let mut events = fme::output::mqtt::EventTracker::default();
     for r in &rows {
-        let ev = events.update(r, r.scale);
+        let u = fme::output::Update {
+            status: fme::output::StatusBits::from_word(r.status),
+            fault: fme::status::FaultCode::from_code(r.fault).expect("a code this version writes"),
+            feeding: r.feeding,
+            scale: r.scale,
+            ..Default::default()
+        };
+        let ev = events.update(&u);
         assert!(
             !ev.iter().any(|e| matches!(
                 e,
@@ -171,7 +178,7 @@ fn write_day(dir: &Path, day: &str) {
     for i in 0..8640i64 {
         let h = i as f64 / 360.0;
         let fault = u16::from((3.0..3.2).contains(&h));
-        w.write(&Row {
+        w.write(&HistoryRow {
             unix_ms: t0 + i * 10_000,
             activity_mps: if fault == 0 { 0.2 + 0.1 * (h / 24.0 * std::f64::consts::TAU).sin() } else { f64::NAN },
             smoothed_mps: 0.2,
@@ -225,7 +232,7 @@ fn report_bad_input_exits_2_naming_the_file_and_line() {
     let mut text = format!("{}\n", history::HEADER);
     for i in 0..3 {
         history::format_row(
-            &Row {
+            &HistoryRow {
                 unix_ms: day_ms("2026-12-04") + i * 1000,
                 activity_mps: 0.1,
                 smoothed_mps: 0.1,

@@ -2,7 +2,7 @@
 //! counters, and latency buckets fine enough that `histogram_quantile` agrees with the console.
 
 use fme::output::bank::RegisterBank;
-use fme::output::metrics::{LATENCY_BOUNDS_S, Snapshot, render};
+use fme::output::metrics::{LATENCY_BOUNDS_S, Scrape, render};
 use fme::status::Shared;
 use std::time::Duration;
 
@@ -10,7 +10,7 @@ use std::time::Duration;
 fn text(latencies_ms: &[f64]) -> String {
     let shared = Shared::new(String::new(), 4);
     shared.with_health(|h| latencies_ms.iter().for_each(|&ms| h.latency.record(ms)));
-    render(&Snapshot::take(&shared, &RegisterBank::new(), Duration::from_secs(5)))
+    render(&Scrape::take(&shared, &RegisterBank::new(), Duration::from_secs(5)))
 }
 
 /// The cumulative buckets (upper bound s, count) of the latency histogram in `text`.
@@ -94,8 +94,13 @@ fn label_values_are_spelled_as_on_mqtt() {
         .filter_map(|l| l.strip_prefix("fme_status_bit{name=\""))
         .map(|l| l.split('"').next().unwrap_or(""))
         .collect();
-    let mqtt: Vec<&str> = fme::output::mqtt::STATUS_BIT_NAMES.iter().map(|(n, _)| *n).collect();
+    // The keys of the `status` object of an MQTT `activity` message, in order.
+    let mut json = String::new();
+    fme::output::mqtt::activity_json("b", 1, &fme::output::Update::default(), &mut json);
+    let status = json.split("\"status\":{").nth(1).and_then(|s| s.split('}').next()).unwrap_or("");
+    let mqtt: Vec<&str> = status.split(',').filter_map(|kv| kv.split('"').nth(1)).collect();
     assert_eq!(names, mqtt);
+    assert_eq!(mqtt.len(), 11, "{json}");
     for l in t.lines().filter(|l| !l.starts_with('#') && l.contains('{')) {
         let labels = &l[l.find('{').unwrap_or(0)..l.rfind('}').unwrap_or(0)];
         assert!(!labels.contains('-'), "one spelling, with underscores as MQTT: {l}");

@@ -7,7 +7,7 @@ use fme::capture::{Backoff, FrameSource, RecordedSource};
 use fme::config::{ModbusMode, WordOrder};
 use fme::output::bank::RegisterBank;
 use fme::output::modbus::{self, ClientSettings, ClientTarget};
-use fme::output::registers::{self, RegisterInputs, status};
+use fme::output::registers::{self, StatusBits, Update};
 use fme::service::{Daemon, RunOptions};
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
@@ -112,7 +112,7 @@ async fn daemon_writes_block_to_plc_survives_plc_outages() {
     tokio::time::sleep(Duration::from_millis(300)).await;
     let blk = bank.block();
     assert_ne!(blk[12], hb0, "heartbeat advances while the PLC is down");
-    assert_eq!(blk[10] & status::PLC_LINK_OK, 0);
+    assert_eq!(blk[10] & StatusBits::PLC_LINK_OK.bits(), 0);
     assert_eq!(blk[11], registers::FaultCode::PlcLink as u16);
     assert!(shared.health().frames_processed > 0, "pipeline never blocks on the PLC");
 
@@ -125,7 +125,7 @@ async fn daemon_writes_block_to_plc_survives_plc_outages() {
     assert_ne!(plc.regs(62, 1)[0], hb1, "heartbeat at base+12 increments in the PLC");
     assert_eq!(plc.regs(50 + 18, 2), bank.block()[18..20].to_vec(), "version registers");
     assert_eq!(plc.regs(0, 50), vec![0; 50], "nothing written below the base address");
-    wait_until("link bit", 5, || bank.block()[10] & status::PLC_LINK_OK != 0).await;
+    wait_until("link bit", 5, || bank.block()[10] & StatusBits::PLC_LINK_OK.bits() != 0).await;
 
     // PLC drops mid-run, then comes back on the same address: the daemon catches up.
     drop(stop);
@@ -135,12 +135,12 @@ async fn daemon_writes_block_to_plc_survives_plc_outages() {
     let plc2 = Plc::new();
     let _stop2 = serve_plc(plc2.clone(), plc_addr).await;
     wait_until("writes after reconnect", 5, || plc2.writes() >= 2).await;
-    assert_ne!(plc2.regs(50 + 10, 1)[0] & status::RUNNING, 0);
+    assert_ne!(plc2.regs(50 + 10, 1)[0] & StatusBits::RUNNING.bits(), 0);
 
     // Shutdown: the final write carries the "stopped" status.
     daemon.shutdown().await;
     let last = plc2.regs(50, 24);
-    assert_eq!(last[10] & status::RUNNING, 0, "final block says stopped: {last:?}");
+    assert_eq!(last[10] & StatusBits::RUNNING.bits(), 0, "final block says stopped: {last:?}");
     assert_eq!(last[11], registers::FaultCode::Stopped as u16);
 }
 
@@ -171,7 +171,7 @@ async fn rtu_client_writes_over_pty() {
     };
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     let task = tokio::spawn(modbus::run_client(settings, bank.clone(), stop_rx));
-    let inp = RegisterInputs { heartbeat: 1234, fish: 5, ..Default::default() };
+    let inp = Update { heartbeat: 1234, fish: 5, ..Default::default() };
     bank.publish(registers::encode(&inp, WordOrder::LowFirst));
     wait_until("rtu write", 5, || plc.writes() >= 1).await;
     assert_eq!(plc.regs(10 + 12, 1), vec![1234]);

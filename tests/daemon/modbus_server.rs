@@ -7,7 +7,7 @@ use fme::capture::{FrameSource, RecordedSource};
 use fme::config::{ModbusMode, WordOrder};
 use fme::output::bank::RegisterBank;
 use fme::output::modbus;
-use fme::output::registers::{self, RegisterInputs, decode_f32, status};
+use fme::output::registers::{self, StatusBits, Update, decode_f32};
 use fme::output::tcp_conns::{Connections, TcpLimits};
 use fme::service::{Daemon, RunOptions};
 use std::sync::Arc;
@@ -17,11 +17,11 @@ use tokio_modbus::prelude::*;
 
 fn sample_bank() -> Arc<RegisterBank> {
     let bank = Arc::new(RegisterBank::new());
-    let inp = RegisterInputs {
+    let inp = Update {
         mean_mps: 0.125,
         smoothed_mps: 0.25,
         fish: 12,
-        status: status::RUNNING | status::CAMERA_OK,
+        status: StatusBits::RUNNING | StatusBits::CAMERA_OK,
         heartbeat: 42,
         feeding: true,
         ..Default::default()
@@ -75,7 +75,7 @@ async fn tcp_reads_writes_and_exceptions() {
     assert_eq!(e, Err(ExceptionCode::IllegalDataAddress), "straddles into the read-only area");
     let e = ctx.write_single_coil(0, true).await.expect("transport");
     assert_eq!(e, Err(ExceptionCode::IllegalDataAddress));
-    assert_eq!(bank.block()[10], status::RUNNING | status::CAMERA_OK, "nothing was written");
+    assert_eq!(bank.block()[10], (StatusBits::RUNNING | StatusBits::CAMERA_OK).bits(), "nothing was written");
     // Unsupported function: illegal function.
     let e = ctx.read_write_multiple_registers(0, 2, 100, &[1]).await.expect("transport");
     assert_eq!(e, Err(ExceptionCode::IllegalFunction));
@@ -251,7 +251,7 @@ async fn daemon_rtu_server_role_and_missing_adapter() {
             .expect("rtu read timed out")
             .expect("transport")
             .expect("exception");
-        assert_ne!(r[0] & status::RUNNING, 0);
+        assert_ne!(r[0] & StatusBits::RUNNING.bits(), 0);
         beats.push(r[2]);
         tokio::time::sleep(Duration::from_millis(250)).await;
     }

@@ -2,7 +2,7 @@
 //! interval band and the smoothed value, the feeding thresholds, the fish count, feeding recommended
 //! and fault codes, against local time (the box's zone or `--tz`).
 
-use super::Row;
+use super::HistoryRow;
 use jiff::tz::TimeZone;
 use plotters::prelude::*;
 use std::path::Path;
@@ -56,7 +56,7 @@ impl Ranged for Ticked {
 
 /// Runs of consecutive rows with no gap longer than `gap_ms` between them (the daemon was down in
 /// a gap: lines are not drawn across it).
-fn runs(rows: &[Row], gap_ms: i64) -> Vec<&[Row]> {
+fn runs(rows: &[HistoryRow], gap_ms: i64) -> Vec<&[HistoryRow]> {
     let mut out = Vec::new();
     let mut start = 0;
     for i in 1..=rows.len() {
@@ -71,13 +71,13 @@ fn runs(rows: &[Row], gap_ms: i64) -> Vec<&[Row]> {
 }
 
 /// The fault a row shows in red: its code when it is a fault ([`crate::status::is_fault_code`]).
-fn fault_of(r: &Row) -> Option<u16> {
+fn fault_of(r: &HistoryRow) -> Option<u16> {
     crate::status::is_fault_code(r.fault).then_some(r.fault)
 }
 
 /// Runs of rows where `key` gives the same `Some` value, as (first ms, last ms, value); a one-row
 /// run gets one minute so that it shows.
-fn spans(rows: &[Row], gap_ms: i64, key: impl Fn(&Row) -> Option<u16>) -> Vec<(i64, i64, u16)> {
+fn spans(rows: &[HistoryRow], gap_ms: i64, key: impl Fn(&HistoryRow) -> Option<u16>) -> Vec<(i64, i64, u16)> {
     let mut out: Vec<(i64, i64, u16)> = Vec::new();
     let mut prev: Option<(i64, u16)> = None;
     for r in rows {
@@ -156,31 +156,70 @@ pub fn count_ticks(max: u32) -> Vec<f64> {
     (0..=max / step + 1).map(|i| f64::from(i * step)).collect()
 }
 
+/// The time axis the three panels share, and how an error names the file.
+struct TimeAxis<'a> {
+    path: &'a Path,
+    from: i64,
+    x_end: f64,
+    xs: Vec<f64>,
+    tz: TimeZone,
+    with_date: bool,
+    /// Rows further apart than this are not joined by a line (the daemon was down).
+    gap_ms: i64,
+}
+
+impl TimeAxis<'_> {
+    /// Hours since the start of the axis.
+    fn x(&self, ms: i64) -> f64 {
+        (ms - self.from) as f64 / 3_600_000.0
+    }
+    fn range(&self) -> Ticked {
+        Ticked::new(0.0..self.x_end, self.xs.clone())
+    }
+    fn label(&self, x: &f64) -> String {
+        tick_label(self.from + (x * 3_600_000.0).round() as i64, &self.tz, self.with_date)
+    }
+    fn err(&self, x: &dyn std::fmt::Display) -> String {
+        format!("{}: {x}", self.path.display())
+    }
+}
+
+type Area<'b> = DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>;
+
 /// Draws `rows` (sorted by time) titled `title` to `path`. Errors are plotters' or the file's, as
 /// text.
-pub fn plot_day(path: &Path, title: &str, rows: &[Row], o: &PlotOptions) -> Result<(), String> {
+pub fn plot_day(path: &Path, title: &str, rows: &[HistoryRow], o: &PlotOptions) -> Result<(), String> {
     crate::draw::register_plot_font();
-    let e = |x: &dyn std::fmt::Display| format!("{}: {x}", path.display());
     let mut dts: Vec<i64> = rows.windows(2).map(|w| w[1].unix_ms - w[0].unix_ms).filter(|d| *d > 0).collect();
     dts.sort_unstable();
     let gap_ms = dts.get(dts.len() / 2).map_or(10_000, |m| (5 * m).max(10_000));
     let (from, to) = (o.from_ms, o.to_ms.max(o.from_ms + 60_000));
-    let x_of = |ms: i64| (ms - from) as f64 / 3_600_000.0;
-    let x_end = x_of(to);
-    let rows: Vec<Row> = rows.iter().copied().filter(|r| (from..=to).contains(&r.unix_ms)).collect();
-    let rows = rows.as_slice();
+    let rows: Vec<HistoryRow> = rows.iter().copied().filter(|r| (from..=to).contains(&r.unix_ms)).collect();
     let (ticks, with_date) = time_ticks(from, to, &o.tz);
-    let xs: Vec<f64> = ticks.iter().map(|&t| x_of(t)).collect();
-    let tz = o.tz.clone();
-    let label = move |x: &f64| tick_label(from + (x * 3_600_000.0).round() as i64, &tz, with_date);
-    let x_axis = || Ticked::new(0.0..x_end, xs.clone());
-
+    let hours = |ms: i64| (ms - from) as f64 / 3_600_000.0;
+    let t = TimeAxis {
+        path,
+        from,
+        x_end: hours(to),
+        xs: ticks.iter().map(|&ms| hours(ms)).collect(),
+        tz: o.tz.clone(),
+        with_date,
+        gap_ms,
+    };
     let root = BitMapBackend::new(path, SIZE).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| e(&x))?;
-    let root = root.titled(title, ("sans-serif", 22)).map_err(|x| e(&x))?;
+    root.fill(&WHITE).map_err(|x| t.err(&x))?;
+    let root = root.titled(title, ("sans-serif", 22)).map_err(|x| t.err(&x))?;
     let (top, rest) = root.split_vertically(SIZE.1 * 52 / 100);
     let (mid, bottom) = rest.split_vertically(SIZE.1 * 22 / 100);
+    activity_panel(&top, &t, &rows, o)?;
+    fish_panel(&mid, &t, &rows)?;
+    faults_panel(&bottom, &t, &rows, o)?;
+    root.present().map_err(|x| t.err(&x))?;
+    Ok(())
+}
 
+/// The top panel: activity, its 95 % band, the smoothed value and the feeding thresholds.
+fn activity_panel(area: &Area<'_>, t: &TimeAxis<'_>, rows: &[HistoryRow], o: &PlotOptions) -> Result<(), String> {
     let v_max = rows
         .iter()
         .map(|r| r.activity_mps + if r.ci95_mps.is_finite() { r.ci95_mps } else { 0.0 })
@@ -189,28 +228,29 @@ pub fn plot_day(path: &Path, title: &str, rows: &[Row], o: &PlotOptions) -> Resu
         .fold(0.0, f64::max)
         .clamp(0.1, 5.0)
         * 1.15;
-    let mut c = ChartBuilder::on(&top)
+    let mut c = ChartBuilder::on(area)
         .margin(10)
         .x_label_area_size(30)
         .y_label_area_size(70)
-        .build_cartesian_2d(x_axis(), 0.0..v_max)
-        .map_err(|x| e(&x))?;
+        .build_cartesian_2d(t.range(), 0.0..v_max)
+        .map_err(|x| t.err(&x))?;
     c.configure_mesh()
-        .x_label_formatter(&label)
+        .x_label_formatter(&|x| t.label(x))
         .y_desc("activity (m/s)")
         .label_style(("sans-serif", 14))
         .draw()
-        .map_err(|x| e(&x))?;
+        .map_err(|x| t.err(&x))?;
     let band = RGBColor(160, 190, 240);
-    let valued: Vec<Row> = rows.iter().copied().filter(|r| r.activity_mps.is_finite()).collect();
+    let valued: Vec<HistoryRow> = rows.iter().copied().filter(|r| r.activity_mps.is_finite()).collect();
     let mut labelled = false;
-    for run in runs(&valued, gap_ms) {
-        let with_ci: Vec<&Row> = run.iter().filter(|r| r.ci95_mps.is_finite()).collect();
+    for run in runs(&valued, t.gap_ms) {
+        let with_ci: Vec<&HistoryRow> = run.iter().filter(|r| r.ci95_mps.is_finite()).collect();
         if with_ci.len() >= 2 {
             let mut poly: Vec<(f64, f64)> =
-                with_ci.iter().map(|r| (x_of(r.unix_ms), (r.activity_mps + r.ci95_mps).min(v_max))).collect();
-            poly.extend(with_ci.iter().rev().map(|r| (x_of(r.unix_ms), (r.activity_mps - r.ci95_mps).max(0.0))));
-            let b = c.draw_series(std::iter::once(Polygon::new(poly, band.mix(0.6).filled()))).map_err(|x| e(&x))?;
+                with_ci.iter().map(|r| (t.x(r.unix_ms), (r.activity_mps + r.ci95_mps).min(v_max))).collect();
+            poly.extend(with_ci.iter().rev().map(|r| (t.x(r.unix_ms), (r.activity_mps - r.ci95_mps).max(0.0))));
+            let b =
+                c.draw_series(std::iter::once(Polygon::new(poly, band.mix(0.6).filled()))).map_err(|x| t.err(&x))?;
             if !labelled {
                 b.label("likely range of the activity (95 %)")
                     .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 20, y + 5)], band.filled()));
@@ -218,10 +258,10 @@ pub fn plot_day(path: &Path, title: &str, rows: &[Row], o: &PlotOptions) -> Resu
         }
         let mean = c
             .draw_series(LineSeries::new(
-                run.iter().map(|r| (x_of(r.unix_ms), r.activity_mps.min(v_max))),
+                run.iter().map(|r| (t.x(r.unix_ms), r.activity_mps.min(v_max))),
                 BLUE.stroke_width(1),
             ))
-            .map_err(|x| e(&x))?;
+            .map_err(|x| t.err(&x))?;
         if !labelled {
             mean.label("activity: average swimming speed of the fish in view")
                 .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
@@ -229,9 +269,9 @@ pub fn plot_day(path: &Path, title: &str, rows: &[Row], o: &PlotOptions) -> Resu
         let sm: Vec<(f64, f64)> = run
             .iter()
             .filter(|r| r.smoothed_mps.is_finite())
-            .map(|r| (x_of(r.unix_ms), r.smoothed_mps.min(v_max)))
+            .map(|r| (t.x(r.unix_ms), r.smoothed_mps.min(v_max)))
             .collect();
-        let smooth = c.draw_series(LineSeries::new(sm, BLACK.stroke_width(2))).map_err(|x| e(&x))?;
+        let smooth = c.draw_series(LineSeries::new(sm, BLACK.stroke_width(2))).map_err(|x| t.err(&x))?;
         if !labelled {
             smooth
                 .label("smoothed activity (what the feeding advice follows)")
@@ -244,8 +284,8 @@ pub fn plot_day(path: &Path, title: &str, rows: &[Row], o: &PlotOptions) -> Resu
             (on, THRESHOLD_COLOURS[0], format!("feeding advised from {on:.2} m/s (smoothed)")),
             (off, THRESHOLD_COLOURS[1], format!("feeding advice ends at {off:.2} m/s")),
         ] {
-            c.draw_series(DashedLineSeries::new([(0.0, v), (x_end, v)], 10, 6, colour.stroke_width(2)))
-                .map_err(|x| e(&x))?
+            c.draw_series(DashedLineSeries::new([(0.0, v), (t.x_end, v)], 10, 6, colour.stroke_width(2)))
+                .map_err(|x| t.err(&x))?
                 .label(text)
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
             labelled = true;
@@ -258,60 +298,68 @@ pub fn plot_day(path: &Path, title: &str, rows: &[Row], o: &PlotOptions) -> Resu
             .label_font(("sans-serif", 14))
             .position(SeriesLabelPosition::UpperRight)
             .draw()
-            .map_err(|x| e(&x))?;
+            .map_err(|x| t.err(&x))?;
     }
+    Ok(())
+}
 
+/// The middle panel: fish in view.
+fn fish_panel(area: &Area<'_>, t: &TimeAxis<'_>, rows: &[HistoryRow]) -> Result<(), String> {
     let f_max = rows.iter().map(|r| r.n_fish).max().unwrap_or(0).max(1);
     let f_ticks = count_ticks(f_max);
     let f_top = f_ticks.last().copied().unwrap_or(1.0);
-    let mut c = ChartBuilder::on(&mid)
+    let mut c = ChartBuilder::on(area)
         .margin(10)
         .x_label_area_size(30)
         .y_label_area_size(70)
-        .build_cartesian_2d(x_axis(), Ticked::new(0.0..f_top, f_ticks))
-        .map_err(|x| e(&x))?;
+        .build_cartesian_2d(t.range(), Ticked::new(0.0..f_top, f_ticks))
+        .map_err(|x| t.err(&x))?;
     c.configure_mesh()
-        .x_label_formatter(&label)
+        .x_label_formatter(&|x| t.label(x))
         .y_label_formatter(&|v| format!("{v:.0}"))
         .y_desc("fish in view")
         .label_style(("sans-serif", 14))
         .draw()
-        .map_err(|x| e(&x))?;
-    for run in runs(rows, gap_ms) {
+        .map_err(|x| t.err(&x))?;
+    for run in runs(rows, t.gap_ms) {
         c.draw_series(LineSeries::new(
-            run.iter().map(|r| (x_of(r.unix_ms), f64::from(r.n_fish))),
+            run.iter().map(|r| (t.x(r.unix_ms), f64::from(r.n_fish))),
             RGBColor(0, 120, 60).stroke_width(1),
         ))
-        .map_err(|x| e(&x))?;
+        .map_err(|x| t.err(&x))?;
     }
+    Ok(())
+}
 
-    let mut c = ChartBuilder::on(&bottom)
+/// The bottom panel: feeding recommended and fault codes.
+fn faults_panel(area: &Area<'_>, t: &TimeAxis<'_>, rows: &[HistoryRow], o: &PlotOptions) -> Result<(), String> {
+    let mut c = ChartBuilder::on(area)
         .margin(10)
         .x_label_area_size(40)
         .y_label_area_size(70)
-        .build_cartesian_2d(x_axis(), Ticked::new(-0.5..8.0, (0..=7).map(f64::from).collect()))
-        .map_err(|x| e(&x))?;
+        .build_cartesian_2d(t.range(), Ticked::new(-0.5..8.0, (0..=7).map(f64::from).collect()))
+        .map_err(|x| t.err(&x))?;
     c.configure_mesh()
-        .x_label_formatter(&label)
+        .x_label_formatter(&|x| t.label(x))
         .y_label_formatter(&|v| format!("{v:.0}"))
-        .x_desc(format!("local time ({})", zone_name(&o.tz, from)))
+        .x_desc(format!("local time ({})", zone_name(&o.tz, t.from)))
         .y_desc("fault code / feeding")
         .label_style(("sans-serif", 14))
         .draw()
-        .map_err(|x| e(&x))?;
+        .map_err(|x| t.err(&x))?;
     let green = RGBColor(40, 170, 60);
     c.draw_series(
-        spans(rows, gap_ms, |r| r.feeding.then_some(1))
+        spans(rows, t.gap_ms, |r| r.feeding.then_some(1))
             .into_iter()
-            .map(|(a, b, _)| Rectangle::new([(x_of(a), -0.4), (x_of(b), 0.4)], green.mix(0.7).filled())),
+            .map(|(a, b, _)| Rectangle::new([(t.x(a), -0.4), (t.x(b), 0.4)], green.mix(0.7).filled())),
     )
-    .map_err(|x| e(&x))?
+    .map_err(|x| t.err(&x))?
     .label("feeding recommended (at 0)")
     .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 20, y + 5)], green.filled()));
-    c.draw_series(spans(rows, gap_ms, fault_of).into_iter().map(|(a, b, v)| {
-        Rectangle::new([(x_of(a), f64::from(v) - 0.35), (x_of(b), f64::from(v) + 0.35)], RED.mix(0.8).filled())
+    c.draw_series(spans(rows, t.gap_ms, fault_of).into_iter().map(|(a, b, v)| {
+        Rectangle::new([(t.x(a), f64::from(v) - 0.35), (t.x(b), f64::from(v) + 0.35)], RED.mix(0.8).filled())
     }))
-    .map_err(|x| e(&x))?
+    .map_err(|x| t.err(&x))?
     .label("fault code (1 camera, 2 detector, 3 depth, 4 stalled, 5 PLC link, 7 unlike fish)")
     .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 20, y + 5)], RED.filled()));
     c.configure_series_labels()
@@ -320,8 +368,7 @@ pub fn plot_day(path: &Path, title: &str, rows: &[Row], o: &PlotOptions) -> Resu
         .label_font(("sans-serif", 13))
         .position(SeriesLabelPosition::UpperRight)
         .draw()
-        .map_err(|x| e(&x))?;
-    root.present().map_err(|x| e(&x))?;
+        .map_err(|x| t.err(&x))?;
     Ok(())
 }
 
@@ -329,8 +376,8 @@ pub fn plot_day(path: &Path, title: &str, rows: &[Row], o: &PlotOptions) -> Resu
 mod tests {
     use super::*;
 
-    fn r(s: i64, fault: u16, feeding: bool) -> Row {
-        Row {
+    fn r(s: i64, fault: u16, feeding: bool) -> HistoryRow {
+        HistoryRow {
             unix_ms: s * 1000,
             activity_mps: 0.1,
             smoothed_mps: 0.1,
@@ -389,7 +436,7 @@ mod tests {
     #[test]
     fn feeding_thresholds_drawn_where_configured() {
         let dir = tempfile::tempdir().expect("tempdir");
-        let rows: Vec<Row> = (0..600).map(|i| r(i * 10, 0, i > 300)).collect();
+        let rows: Vec<HistoryRow> = (0..600).map(|i| r(i * 10, 0, i > 300)).collect();
         let count = |feeding: Option<(f64, f64)>, name: &str| {
             let path = dir.path().join(name);
             let o = PlotOptions { from_ms: 0, to_ms: 6_000_000, tz: TimeZone::UTC, feeding };

@@ -1,7 +1,10 @@
-//! The shared register bank: the latest block (published by the service, read by every Modbus
-//! role and the console) and the holding registers the PLC may write.
+//! The shared register bank: the latest published update and its block (published by the service,
+//! the block read by every Modbus role, the update by the console and the metrics) and the holding
+//! registers the PLC may write.
 
 use super::registers::{BLOCK_LEN, HR_WRITABLE_LEN, HR_WRITABLE_START};
+use super::update::Update;
+use crate::config::WordOrder;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -11,6 +14,7 @@ use tokio::sync::watch;
 #[derive(Debug)]
 pub struct RegisterBank {
     block: watch::Sender<[u16; BLOCK_LEN]>,
+    update: Mutex<Update>,
     writable: Mutex<[u16; HR_WRITABLE_LEN]>,
     epoch: Instant,
     /// ms since `epoch` + 1 of the last served request (0 = never).
@@ -68,6 +72,7 @@ impl RegisterBank {
     pub fn new() -> Self {
         Self {
             block: watch::Sender::new([0; BLOCK_LEN]),
+            update: Mutex::new(Update::default()),
             writable: Mutex::new([0; HR_WRITABLE_LEN]),
             epoch: Instant::now(),
             last_request_ms: AtomicU64::new(0),
@@ -89,6 +94,18 @@ impl RegisterBank {
     /// Publishes a new block (never blocks).
     pub fn publish(&self, block: [u16; BLOCK_LEN]) {
         self.block.send_replace(block);
+    }
+
+    /// Publishes update `u`: keeps it for the console and the metrics, then its block encoded in
+    /// word order `order` (never blocks).
+    pub fn publish_update(&self, u: &Update, order: WordOrder) {
+        *self.update.lock().unwrap_or_else(|p| p.into_inner()) = *u;
+        self.publish(super::registers::encode(u, order));
+    }
+
+    /// The latest published update (all default before the first).
+    pub fn update(&self) -> Update {
+        *self.update.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// The latest block.

@@ -13,7 +13,7 @@
 //! | 6-7 | half-width of the 95% interval, m/s (float32) |
 //! | 8 | fish count |
 //! | 9 | activity mean, mm/s (uint16, saturating; 65535 = unavailable) |
-//! | 10 | status bits ([`status`]) |
+//! | 10 | status bits ([`StatusBits`]) |
 //! | 11 | fault code ([`FaultCode`]) |
 //! | 12 | heartbeat (increments every update, wraps) |
 //! | 13-14 | uptime, s (uint32) |
@@ -42,60 +42,6 @@ pub const HR_PLC_HEARTBEAT: u16 = 101;
 /// HR 102-103: reserved, writable, stored and echoed on the console only.
 pub const HR_RESERVED: u16 = 102;
 
-/// Status bits of register 10.
-pub mod status {
-    /// Bit 0: the daemon is running (cleared in the final "stopped" write).
-    pub const RUNNING: u16 = 1 << 0;
-    /// Bit 1: the camera delivers frames.
-    pub const CAMERA_OK: u16 = 1 << 1;
-    /// Bit 2: the detector works.
-    pub const DETECTOR_OK: u16 = 1 << 2;
-    /// Bit 3: metric depth is calibrated.
-    pub const DEPTH_CALIBRATED: u16 = 1 << 3;
-    /// Bit 4: the activity value is stale.
-    pub const STALE: u16 = 1 << 4;
-    /// Bit 5: the PLC link is up (server: a request within the last 10 s; client: last write succeeded).
-    pub const PLC_LINK_OK: u16 = 1 << 5;
-    /// Bit 6: too few fish tracked for a reliable mean.
-    pub const TOO_FEW_FISH: u16 = 1 << 6;
-    /// Bit 7: disk fault: recording paused or the history held in memory after a write error (disk
-    /// full, read-only), or a write to the state directory stalled for `service.disk_stall_s`
-    /// (docs/recording.md). The activity values are unaffected.
-    pub const RECORD_FAULT: u16 = 1 << 7;
-    /// Bit 8: the metric scale in use comes from the fish, not the reference objects (`depth.scale`).
-    pub const SCALE_FROM_FISH: u16 = 1 << 8;
-    /// Bit 9: telemetry fault: MQTT is on and the broker refused the login or the TLS handshake
-    /// failed (retried with backoff; docs/mqtt.md). The Modbus outputs are unaffected.
-    pub const TELEMETRY_FAULT: u16 = 1 << 9;
-    /// Bit 10: the detections look unlike fish: their scores, sizes, nesting, tracks and count
-    /// have left the range measured on the training data for `familiarity.raise_after_s`
-    /// (`[familiarity]`, docs/pipeline.md). The value is not to be trusted; the feeding rule does
-    /// not act on it (feeding recommended is off).
-    pub const UNLIKE_FISH: u16 = 1 << 10;
-
-    /// Every bit by name, in bit order: the one spelling the MQTT `activity` JSON, the metrics
-    /// (`fme_status_bit{name}`) and the console use.
-    pub const NAMES: [(&str, u16); 11] = [
-        ("running", RUNNING),
-        ("camera_ok", CAMERA_OK),
-        ("detector_ok", DETECTOR_OK),
-        ("depth_calibrated", DEPTH_CALIBRATED),
-        ("stale", STALE),
-        ("plc_link_ok", PLC_LINK_OK),
-        ("too_few_fish", TOO_FEW_FISH),
-        ("record_fault", RECORD_FAULT),
-        ("scale_from_fish", SCALE_FROM_FISH),
-        ("telemetry_fault", TELEMETRY_FAULT),
-        ("unlike_fish", UNLIKE_FISH),
-    ];
-
-    /// The names of the bits set in `bits`, space separated (`-` when none is).
-    pub fn words(bits: u16) -> String {
-        let v: Vec<&str> = NAMES.iter().filter(|(_, b)| bits & b != 0).map(|(n, _)| *n).collect();
-        if v.is_empty() { "-".into() } else { v.join(" ") }
-    }
-}
-
 /// How a register's raw word(s) read ([`MAP`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Encoding {
@@ -111,7 +57,7 @@ pub enum Encoding {
     Thousandths,
     /// uint16, the age x10 in s; 65534 = no value yet.
     Age,
-    /// The status bits ([`status`]).
+    /// The status bits ([`StatusBits`]).
     Bits,
     /// The fault code ([`FaultCode`]).
     Fault,
@@ -162,7 +108,7 @@ impl Register {
             Encoding::Thousandths => unit(format!("{:.3}", f64::from(w) / 1000.0)),
             Encoding::Age if w >= u16::MAX - 1 => "no value yet".into(),
             Encoding::Age => unit(format!("{:.1}", f64::from(w) / 10.0)),
-            Encoding::Bits => status::words(w),
+            Encoding::Bits => StatusBits::from_word(w).words(),
             Encoding::Fault => crate::status::fault_name(w).to_string(),
             Encoding::Flag => (if w == 0 { "no" } else { "yes" }).to_string(),
         }
@@ -193,44 +139,8 @@ pub const MAP: [Register; 19] = [
     Register { addr: 23, name: "feeding_ack", encoding: Encoding::U16, unit: "" },
 ];
 
+pub use super::update::{StatusBits, Update};
 pub use crate::status::FaultCode;
-
-/// Everything the register block is computed from (a pure value: the encoder has no I/O).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct RegisterInputs {
-    /// Activity mean, m/s (NaN when unavailable).
-    pub mean_mps: f64,
-    /// Activity mean, body lengths/s.
-    pub mean_bls: f64,
-    /// Smoothed activity, m/s.
-    pub smoothed_mps: f64,
-    /// 95% interval half-width, m/s.
-    pub ci95_half_mps: f64,
-    /// Fish count.
-    pub fish: u32,
-    /// Status bits ([`status`]).
-    pub status: u16,
-    /// Fault code.
-    pub fault: FaultCode,
-    /// Heartbeat counter.
-    pub heartbeat: u16,
-    /// Uptime, s.
-    pub uptime_s: u32,
-    /// Camera frame rate, frames/s.
-    pub camera_fps: f64,
-    /// Dropped frames (total).
-    pub dropped: u64,
-    /// Feeding recommended.
-    pub feeding: bool,
-    /// Detector runs/s.
-    pub detector_hz: f64,
-    /// Depth runs/s.
-    pub depth_hz: f64,
-    /// Age of the activity value, s (infinite when there is none).
-    pub value_age_s: f64,
-    /// Last feeding acknowledge from the PLC.
-    pub feeding_ack: u16,
-}
 
 /// Splits a 32-bit value into two registers in the configured word order.
 pub fn split_u32(v: u32, order: WordOrder) -> [u16; 2] {
@@ -271,7 +181,7 @@ pub fn version() -> (u16, u16) {
 }
 
 /// Encodes the register block (pure; see the module table).
-pub fn encode(inp: &RegisterInputs, order: WordOrder) -> [u16; BLOCK_LEN] {
+pub fn encode(inp: &Update, order: WordOrder) -> [u16; BLOCK_LEN] {
     let mut r = [0u16; BLOCK_LEN];
     let mut put_f32 = |at: usize, v: f64| r[at..at + 2].copy_from_slice(&encode_f32(v as f32, order));
     put_f32(0, inp.mean_mps);
@@ -284,7 +194,7 @@ pub fn encode(inp: &RegisterInputs, order: WordOrder) -> [u16; BLOCK_LEN] {
     } else {
         u16::MAX
     };
-    r[10] = inp.status;
+    r[10] = inp.status.bits();
     r[11] = inp.fault as u16;
     r[12] = inp.heartbeat;
     r[13..15].copy_from_slice(&split_u32(inp.uptime_s, order));
@@ -318,13 +228,13 @@ mod tests {
 
     #[test]
     fn block_layout() {
-        let inp = RegisterInputs {
+        let inp = Update {
             mean_mps: 0.2345,
             mean_bls: 0.67,
             smoothed_mps: 0.25,
             ci95_half_mps: 0.01,
             fish: 17,
-            status: status::RUNNING | status::CAMERA_OK,
+            status: StatusBits::RUNNING | StatusBits::CAMERA_OK,
             fault: FaultCode::Depth,
             heartbeat: 65535,
             uptime_s: 70_000,
@@ -335,6 +245,7 @@ mod tests {
             depth_hz: 5.0,
             value_age_s: 0.42,
             feeding_ack: 1,
+            ..Update::default()
         };
         let r = encode(&inp, WordOrder::HighFirst);
         assert_eq!(decode_f32([r[0], r[1]], WordOrder::HighFirst), 0.2345);
@@ -357,12 +268,12 @@ mod tests {
 
     #[test]
     fn unavailable_values() {
-        let inp = RegisterInputs { mean_mps: f64::NAN, value_age_s: f64::INFINITY, ..Default::default() };
+        let inp = Update { mean_mps: f64::NAN, value_age_s: f64::INFINITY, ..Default::default() };
         let r = encode(&inp, WordOrder::HighFirst);
         assert!(decode_f32([r[0], r[1]], WordOrder::HighFirst).is_nan());
         assert_eq!(r[9], u16::MAX);
         assert_eq!(r[22], u16::MAX - 1);
-        let big = RegisterInputs { mean_mps: 1000.0, ..Default::default() };
+        let big = Update { mean_mps: 1000.0, ..Default::default() };
         assert_eq!(encode(&big, WordOrder::HighFirst)[9], 65534);
     }
 
@@ -374,11 +285,11 @@ mod tests {
             next += r.len();
         }
         assert_eq!(next, BLOCK_LEN);
-        let inp = RegisterInputs {
+        let inp = Update {
             mean_mps: 0.2345,
             mean_bls: f64::NAN,
             fish: 17,
-            status: status::RUNNING | status::TOO_FEW_FISH,
+            status: StatusBits::RUNNING | StatusBits::TOO_FEW_FISH,
             fault: FaultCode::Camera,
             uptime_s: 70_000,
             camera_fps: 29.97,

@@ -67,35 +67,7 @@ pub async fn spawn(
                     let _ = rx.await;
                 },
             )));
-            shared.log(Level::INFO, format!("modbus tcp server on {addr}"));
-            let open = crate::config::allow::open_to_all(&addr.to_string(), &m.allow);
-            let _ = shared.modbus.set(if open {
-                format!("tcp-server on {addr}, OPEN TO EVERY ADDRESS (output.modbus.allow is empty)")
-            } else if m.allow.is_empty() {
-                format!("tcp-server on {addr} (this box only)")
-            } else {
-                format!("tcp-server on {addr}, allow {}", m.allow.join(", "))
-            });
-            if open {
-                shared.log(
-                    Level::WARN,
-                    format!(
-                        "modbus tcp server on {addr} is open to every address: output.modbus.allow is empty, so any \
-                         host on the network may read the registers and write HR 100-103. List the PLC's address \
-                         (and any HMI/SCADA poller) in output.modbus.allow"
-                    ),
-                );
-            }
-            // The built-in default serves this box only; a service needs the board config's address.
-            if addr.ip().is_loopback() && std::env::var_os("INVOCATION_ID").is_some() {
-                shared.log(
-                    Level::WARN,
-                    format!(
-                        "modbus tcp server listens on {addr}, this box only: a PLC on the network cannot \
-                         reach it. Set output.modbus.listen = \"0.0.0.0:502\" (as boards/*.toml do)"
-                    ),
-                );
-            }
+            announce_tcp_server(m, addr, shared);
         }
         ModbusMode::RtuServer => {
             // A missing RS-485 adapter is retried with backoff, not fatal.
@@ -144,6 +116,40 @@ pub async fn spawn(
         roles.serial_tx = Some(tx);
     }
     Ok(roles)
+}
+
+/// Logs where the Modbus TCP server listens and who may reach it, warning when it is open to every
+/// address or, under systemd, reachable from this box only; the console `status` shows the same.
+fn announce_tcp_server(m: &crate::config::ModbusConfig, addr: SocketAddr, shared: &Shared) {
+    shared.log(Level::INFO, format!("modbus tcp server on {addr}"));
+    let open = crate::config::allow::open_to_all(&addr.to_string(), &m.allow);
+    let _ = shared.modbus.set(if open {
+        format!("tcp-server on {addr}, OPEN TO EVERY ADDRESS (output.modbus.allow is empty)")
+    } else if m.allow.is_empty() {
+        format!("tcp-server on {addr} (this box only)")
+    } else {
+        format!("tcp-server on {addr}, allow {}", m.allow.join(", "))
+    });
+    if open {
+        shared.log(
+            Level::WARN,
+            format!(
+                "modbus tcp server on {addr} is open to every address: output.modbus.allow is empty, so any \
+                 host on the network may read the registers and write HR 100-103. List the PLC's address \
+                 (and any HMI/SCADA poller) in output.modbus.allow"
+            ),
+        );
+    }
+    // The built-in default serves this box only; a service needs the board config's address.
+    if addr.ip().is_loopback() && std::env::var_os("INVOCATION_ID").is_some() {
+        shared.log(
+            Level::WARN,
+            format!(
+                "modbus tcp server listens on {addr}, this box only: a PLC on the network cannot \
+                 reach it. Set output.modbus.listen = \"0.0.0.0:502\" (as boards/*.toml do)"
+            ),
+        );
+    }
 }
 
 fn serial_line_loop(device: String, baud: u32, rx: std::sync::mpsc::Receiver<String>, shared: Arc<Shared>) {

@@ -8,7 +8,7 @@
 //! - `status_hex`: register 10 as 4 hex digits; `fault`: register 11; `feeding`: 0/1.
 //! - `CS`: two upper-case hex digits, XOR of every byte between `$` and `*` (NMEA 0183 style).
 
-use super::registers::RegisterInputs;
+use super::update::Update;
 use std::fmt::Write as _;
 
 /// XOR checksum of a payload (the bytes between `$` and `*`).
@@ -25,7 +25,7 @@ fn num(out: &mut String, v: f64) {
 }
 
 /// Formats one line (with `\r\n`) into `out` (cleared first; reuse it to avoid allocation).
-pub fn format_line(inp: &RegisterInputs, out: &mut String) {
+pub fn format_line(inp: &Update, out: &mut String) {
     out.clear();
     out.push('$');
     let _ = write!(out, "FME,{},{}", inp.heartbeat, inp.uptime_s);
@@ -33,7 +33,7 @@ pub fn format_line(inp: &RegisterInputs, out: &mut String) {
     num(out, inp.mean_bls);
     num(out, inp.smoothed_mps);
     num(out, inp.ci95_half_mps);
-    let _ = write!(out, ",{},{:04X},{},{}", inp.fish, inp.status, inp.fault as u16, u8::from(inp.feeding));
+    let _ = write!(out, ",{},{:04X},{},{}", inp.fish, inp.status.bits(), inp.fault as u16, u8::from(inp.feeding));
     let cs = checksum(&out[1..]);
     let _ = write!(out, "*{cs:02X}\r\n");
 }
@@ -53,7 +53,7 @@ mod tests {
 
     #[test]
     fn line_round_trip_and_checksum() {
-        let inp = RegisterInputs {
+        let inp = Update {
             heartbeat: 7,
             uptime_s: 12,
             mean_mps: 0.21234,
@@ -61,7 +61,7 @@ mod tests {
             smoothed_mps: 0.2,
             ci95_half_mps: f64::NAN,
             fish: 9,
-            status: 0x23,
+            status: crate::output::update::StatusBits::from_word(0x23),
             fault: FaultCode::Camera,
             feeding: true,
             ..Default::default()

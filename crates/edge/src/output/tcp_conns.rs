@@ -18,6 +18,7 @@
 
 use super::bank::RegisterBank;
 use super::log_throttle::LogThrottle;
+use super::peer_limit::PeerLimit;
 use crate::config::allow::AllowList;
 use std::future::Future;
 use std::io;
@@ -161,8 +162,8 @@ impl Connections {
         let now = Instant::now();
         let id = {
             let mut t = self.lock();
-            let per_peer = self.limits.max_per_peer.clamp(1, self.limits.max_connections.max(1));
-            if t.open.iter().filter(|e| e.peer.ip() == peer.ip()).count() >= per_peer {
+            let per_peer = PeerLimit::new(self.limits.max_per_peer, self.limits.max_connections);
+            if per_peer.reached(peer.ip(), t.open.iter().map(|e| e.peer.ip())) {
                 let Some(i) = self.victim(&t, now, Some(peer)) else {
                     return self.refuse(&mut t, peer, now, "per-address limit");
                 };

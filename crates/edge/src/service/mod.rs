@@ -25,7 +25,7 @@ use crate::output::bank::RegisterBank;
 use crate::output::roles::RoleError;
 use crate::status::Shared;
 use fme_core::pipeline::{FishPipeline, Pipeline};
-use publish::Publisher;
+use publish::{Publish, Publisher, publish_and_send};
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -441,12 +441,7 @@ fn pipeline_loop(mut c: PipelineCtx) {
             }
         });
         if due {
-            let mut p = c.publisher.lock().unwrap_or_else(|p| p.into_inner());
-            let line = p.publish(&c.shared, Instant::now(), false);
-            if let Some(tx) = &c.serial_tx {
-                let _ = tx.try_send(line.to_string()); // never wait on a slow logger
-            }
-            drop(p);
+            publish_and_send(&c.publisher, &c.shared, c.serial_tx.as_ref(), Publish::Update);
             let ms = frame.arrived.elapsed().as_secs_f64() * 1000.0;
             c.shared.with_health(|h| h.latency.record(ms));
         }
@@ -505,7 +500,7 @@ impl Daemon {
             shared.log(Level::INFO, format!("history: one row per update in {}", dir.display()));
         }
         // Publish a first block at once so a PLC never reads all zeros from a running box.
-        let _ = publisher.lock().unwrap_or_else(|p| p.into_inner()).publish(&shared, Instant::now(), false);
+        publish_and_send(&publisher, &shared, None, Publish::Update);
         if cfg.output.mqtt.enabled {
             // After the first block: the broker hears from the box once its capture runs.
             let (tx, thread) = crate::output::mqtt::spawn(&cfg, shared.clone())
@@ -605,13 +600,7 @@ impl Daemon {
                 if sh.stopping() {
                     return;
                 }
-                let mut p = pb.lock().unwrap_or_else(|p| p.into_inner());
-                if p.last_publish.is_none_or(|t| t.elapsed() >= period + period / 2) {
-                    let line = p.publish(&sh, Instant::now(), false);
-                    if let Some(tx) = &stx {
-                        let _ = tx.try_send(line.to_string());
-                    }
-                }
+                publish_and_send(&pb, &sh, stx.as_ref(), Publish::IfQuietFor(period + period / 2));
             }
         }));
         if let Some(every) = timing.live_view {
@@ -700,17 +689,8 @@ impl Daemon {
             let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
         }
         self.shared.request_stop();
-        {
-            let mut p = self.publisher.lock().unwrap_or_else(|p| p.into_inner());
-            let line = p.publish(&self.shared, Instant::now(), true);
-            if let Some(tx) = &self.serial_tx {
-                let _ = tx.try_send(line.to_string());
-            }
-            // The "stopped" row is the history's last: the writer drains, fsyncs and ends.
-            p.set_history(None);
-            // MQTT: delivers what it holds, publishes status "offline" (retained), disconnects.
-            p.set_mqtt(None);
-        }
+        // The "stopped" update, the history's and MQTT's last.
+        publish_and_send(&self.publisher, &self.shared, self.serial_tx.as_ref(), Publish::Stopped);
         let _ = self.stop_tx.send(true);
         if let Some(t) = self.client_task.take() {
             let limit = Duration::from_millis(self.cfg.output.modbus.timeout_ms.min(800) + 100);

@@ -1,17 +1,20 @@
-//! Turns the health snapshot into register blocks: status bits, fault code, heartbeat, feeding rule.
+//! Turns the health snapshot into the published update (status bits, fault code, heartbeat, feeding
+//! rule), made once per update and handed to every output: register block, history, MQTT, serial line.
 
 use crate::config::{Config, ModbusMode, WordOrder};
 use crate::output::bank::RegisterBank;
 use crate::output::feeding::FeedingRule;
-use crate::output::registers::{self, FaultCode, RegisterInputs, status};
+use crate::output::registers::{self, FaultCode};
+use crate::output::{StatusBits, Update};
 use crate::status::{Health, Shared};
-use std::sync::Arc;
+use std::sync::mpsc::SyncSender;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// A server-role PLC link counts as up when it polled within this window.
 pub const SERVER_LINK_WINDOW: Duration = Duration::from_secs(10);
 
-/// Builds and publishes register blocks. Owned by whoever publishes (pipeline thread or keepalive),
+/// Makes and publishes the updates. Owned by whoever publishes (pipeline thread or keepalive),
 /// behind a mutex in [`super::Daemon`].
 #[derive(Debug)]
 pub struct Publisher {
@@ -66,15 +69,9 @@ impl Publisher {
         self.mqtt = tx;
     }
 
-    /// Computes the register inputs at `now` (pure apart from advancing the heartbeat and feeding rule).
-    pub fn inputs(
-        &mut self,
-        h: &Health,
-        plc_link_ok: bool,
-        feeding_ack: u16,
-        now: Instant,
-        stopped: bool,
-    ) -> RegisterInputs {
+    /// Makes the update at `now` (pure apart from advancing the heartbeat and feeding rule, and the
+    /// wall clock it is stamped with).
+    pub fn update(&mut self, h: &Health, plc_link_ok: bool, feeding_ack: u16, now: Instant, stopped: bool) -> Update {
         self.heartbeat = self.heartbeat.wrapping_add(1);
         let age = h.last_sample_at.map(|t| now.saturating_duration_since(t));
         let stale = age.is_none_or(|a| a > self.stale_after);
@@ -90,41 +87,20 @@ impl Publisher {
         let unlike_fish = h.last_sample.is_some_and(|s| s.flags.unlike_fish);
         let smoothed = sample.filter(|s| !s.flags.unlike_fish).map(|s| s.smoothed.get());
         let feeding = if stopped { false } else { self.feeding.update(uptime.as_secs_f64(), smoothed) };
-        let mut bits = 0;
-        if !stopped {
-            bits |= status::RUNNING;
-        }
-        if h.camera_ok {
-            bits |= status::CAMERA_OK;
-        }
-        if h.stage.detector_ok {
-            bits |= status::DETECTOR_OK;
-        }
-        if h.fit_state.fitted || h.last_sample.is_some_and(|s| !s.flags.unfitted) {
-            bits |= status::DEPTH_CALIBRATED;
-        }
-        if stale {
-            bits |= status::STALE;
-        }
-        if plc_link_ok {
-            bits |= status::PLC_LINK_OK;
-        }
-        if h.last_sample.is_none_or(|s| s.flags.too_few_fish) {
-            bits |= status::TOO_FEW_FISH;
-        }
+        let mut bits = StatusBits::empty();
+        bits.set(StatusBits::RUNNING, !stopped);
+        bits.set(StatusBits::CAMERA_OK, h.camera_ok);
+        bits.set(StatusBits::DETECTOR_OK, h.stage.detector_ok);
+        bits.set(StatusBits::DEPTH_CALIBRATED, h.fit_state.fitted || h.last_sample.is_some_and(|s| !s.flags.unfitted));
+        bits.set(StatusBits::STALE, stale);
+        bits.set(StatusBits::PLC_LINK_OK, plc_link_ok);
+        bits.set(StatusBits::TOO_FEW_FISH, h.last_sample.is_none_or(|s| s.flags.too_few_fish));
         // Bit 7: the state directory's disk fails writes (recorder or history) or a write stalls.
-        if h.record.disk_fault || h.disk.history_fault || h.disk.stalled_for(now) >= self.disk_stall {
-            bits |= status::RECORD_FAULT;
-        }
-        if h.fit_state.source == fme_core::pipeline::ScaleSource::Fish {
-            bits |= status::SCALE_FROM_FISH;
-        }
-        if h.mqtt.link == crate::status::MqttLink::AuthFailed {
-            bits |= status::TELEMETRY_FAULT;
-        }
-        if unlike_fish {
-            bits |= status::UNLIKE_FISH;
-        }
+        let disk = h.record.disk_fault || h.disk.history_fault || h.disk.stalled_for(now) >= self.disk_stall;
+        bits.set(StatusBits::RECORD_FAULT, disk);
+        bits.set(StatusBits::SCALE_FROM_FISH, h.fit_state.source == fme_core::pipeline::ScaleSource::Fish);
+        bits.set(StatusBits::TELEMETRY_FAULT, h.mqtt.link == crate::status::MqttLink::AuthFailed);
+        bits.set(StatusBits::UNLIKE_FISH, unlike_fish);
         let client = matches!(self.mode, ModbusMode::TcpClient | ModbusMode::RtuClient);
         let fault = if stopped {
             FaultCode::Stopped
@@ -144,7 +120,8 @@ impl Publisher {
             FaultCode::None
         };
         let nan = f64::NAN;
-        RegisterInputs {
+        Update {
+            unix_ms: crate::history::now_unix_ms(),
             mean_mps: sample.map_or(nan, |s| s.mean.get()),
             mean_bls: sample.map_or(nan, |s| s.mean_body_lengths),
             smoothed_mps: sample.map_or(nan, |s| s.smoothed.get()),
@@ -161,6 +138,7 @@ impl Publisher {
             depth_hz: h.stage.depth_hz,
             value_age_s: age.map_or(f64::INFINITY, |a| a.as_secs_f64()),
             feeding_ack,
+            scale: h.fit_state.source,
         }
     }
 
@@ -178,39 +156,62 @@ impl Publisher {
             ModbusMode::TcpClient | ModbusMode::RtuClient => bank.client_link_ok(),
         };
         let ack = bank.writable()[usize::from(registers::HR_FEEDING_ACK - registers::HR_WRITABLE_START)];
-        let (inp, scale) = shared.with_health(|h| {
-            let inp = self.inputs(h, link, ack, now, stopped);
-            h.fault = inp.fault;
-            h.feeding = inp.feeding;
+        let u = shared.with_health(|h| {
+            let u = self.update(h, link, ack, now, stopped);
             h.updates += 1;
-            (inp, h.fit_state.source)
+            u
         });
-        bank.publish(registers::encode(&inp, self.order));
-        if self.history.is_some() || self.mqtt.is_some() {
-            let row = crate::history::Row {
-                unix_ms: crate::history::now_unix_ms(),
-                activity_mps: inp.mean_mps,
-                smoothed_mps: inp.smoothed_mps,
-                ci95_mps: inp.ci95_half_mps,
-                n_fish: inp.fish,
-                bls: inp.mean_bls,
-                status: inp.status,
-                fault: inp.fault as u16,
-                feeding: inp.feeding,
-                scale,
-                unlike_fish: inp.status & status::UNLIKE_FISH != 0,
-            };
-            if let Some(h) = &self.history {
-                h.send(row);
-            }
-            if let Some(m) = &mut self.mqtt {
-                m.send(row);
-            }
+        bank.publish_update(&u, self.order);
+        if let Some(h) = &self.history {
+            h.send(crate::history::HistoryRow::from(&u));
+        }
+        if let Some(m) = &mut self.mqtt {
+            m.send(u);
         }
         self.last_publish = Some(now);
-        crate::output::serial_line::format_line(&inp, &mut self.line);
+        crate::output::serial_line::format_line(&u, &mut self.line);
         &self.line
     }
+}
+
+/// Which publish [`publish_and_send`] makes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Publish {
+    /// An update (a frame's, or the first one at start).
+    Update,
+    /// The keepalive's: only when no update went out for `0` (the registers keep moving while the
+    /// pipeline makes no samples).
+    IfQuietFor(Duration),
+    /// The final "stopped" update; then the history and MQTT are let go (it is their last).
+    Stopped,
+}
+
+/// Locks the publisher, publishes (as `what` says) and sends the serial line to `serial` (never
+/// waiting on a slow logger). Returns whether it published.
+pub fn publish_and_send(
+    publisher: &Mutex<Publisher>,
+    shared: &Shared,
+    serial: Option<&SyncSender<String>>,
+    what: Publish,
+) -> bool {
+    let mut p = publisher.lock().unwrap_or_else(|p| p.into_inner());
+    if let Publish::IfQuietFor(quiet) = what
+        && p.last_publish.is_some_and(|t| t.elapsed() < quiet)
+    {
+        return false;
+    }
+    let stopped = what == Publish::Stopped;
+    let line = p.publish(shared, Instant::now(), stopped);
+    if let Some(tx) = serial {
+        let _ = tx.try_send(line.to_string());
+    }
+    if stopped {
+        // The "stopped" row is the history's last: the writer drains, fsyncs and ends.
+        p.set_history(None);
+        // MQTT: delivers what it holds, publishes status "offline" (retained), disconnects.
+        p.set_mqtt(None);
+    }
+    true
 }
 
 #[cfg(test)]
@@ -258,8 +259,8 @@ mod tests {
         for s in 0..=cfg.feeding.min_off_s as u64 + 1 {
             let now = t0 + Duration::from_secs(s);
             (h.last_sample_at, h.last_processed_at) = (Some(now), Some(now));
-            let inp = p.inputs(&h, true, 0, now, false);
-            assert_eq!(inp.status & status::UNLIKE_FISH, 0);
+            let inp = p.update(&h, true, 0, now, false);
+            assert!(!inp.status.contains(StatusBits::UNLIKE_FISH));
             assert_eq!(inp.fault, FaultCode::None);
             if inp.feeding && feeding_on_at.is_none() {
                 feeding_on_at = Some(s);
@@ -272,17 +273,17 @@ mod tests {
         for s in 0..2 * cfg.feeding.min_off_s as u64 {
             let now = t0 + Duration::from_secs(cfg.feeding.min_off_s as u64 + 2 + s);
             (flagged.last_sample_at, flagged.last_processed_at) = (Some(now), Some(now));
-            let inp = p.inputs(&flagged, true, 0, now, false);
-            assert_ne!(inp.status & status::UNLIKE_FISH, 0, "bit 10 at {s} s");
+            let inp = p.update(&flagged, true, 0, now, false);
+            assert!(inp.status.contains(StatusBits::UNLIKE_FISH), "bit 10 at {s} s");
             assert_eq!(inp.fault, FaultCode::UnlikeFish);
             assert!(!inp.feeding, "the feeding rule does not act on a flagged value ({s} s)");
             assert!((inp.mean_mps - 0.5).abs() < 1e-9, "the value itself is still published");
         }
         // A camera fault is more severe.
         flagged.camera_ok = false;
-        let inp = p.inputs(&flagged, true, 0, t0 + Duration::from_secs(10_000), false);
+        let inp = p.update(&flagged, true, 0, t0 + Duration::from_secs(10_000), false);
         assert_eq!(inp.fault, FaultCode::Camera);
-        assert_ne!(inp.status & status::UNLIKE_FISH, 0);
+        assert!(inp.status.contains(StatusBits::UNLIKE_FISH));
     }
 
     #[test]
@@ -293,20 +294,20 @@ mod tests {
         let mut h = Shared::new(String::new(), 4).health();
         h.started = t0;
         // The first block, before the capture thread has a frame: no fault, camera bit clear.
-        let inp = p.inputs(&h, true, 0, t0, false);
+        let inp = p.update(&h, true, 0, t0, false);
         assert_eq!(inp.fault, FaultCode::None);
-        assert_eq!(inp.status & status::CAMERA_OK, 0);
+        assert!(!inp.status.contains(StatusBits::CAMERA_OK));
         // First frame captured, none processed yet: not a stall.
         h.camera_ok = true;
         h.frames_captured = 1;
-        assert_eq!(p.inputs(&h, true, 0, t0 + Duration::from_millis(50), false).fault, FaultCode::None);
+        assert_eq!(p.update(&h, true, 0, t0 + Duration::from_millis(50), false).fault, FaultCode::None);
         // A camera silent past service.stall_after_s, or one that failed, is a camera fault.
         let mut silent = Shared::new(String::new(), 4).health();
         silent.started = t0;
         let stall = super::super::timing::Timing::from_config(&cfg).expect("default timing").stall_after;
         let late = t0 + stall + Duration::from_secs(1);
-        assert_eq!(p.inputs(&silent, true, 0, late, false).fault, FaultCode::Camera);
+        assert_eq!(p.update(&silent, true, 0, late, false).fault, FaultCode::Camera);
         silent.capture_errors = 1;
-        assert_eq!(p.inputs(&silent, true, 0, t0, false).fault, FaultCode::Camera);
+        assert_eq!(p.update(&silent, true, 0, t0, false).fault, FaultCode::Camera);
     }
 }

@@ -110,10 +110,6 @@ pub struct Health {
     pub stage: StageHealth,
     /// Calibration.
     pub fit_state: DepthFitState,
-    /// Current fault.
-    pub fault: FaultCode,
-    /// Feeding recommended.
-    pub feeding: bool,
     /// Frame-to-register latency.
     pub latency: LatencyHistogram,
     /// Text of the current tracks (console `tracks`), refreshed at the output rate.
@@ -281,8 +277,6 @@ impl Health {
             last_processed_at: None,
             stage: StageHealth::default(),
             fit_state: DepthFitState::default(),
-            fault: FaultCode::None,
-            feeding: false,
             latency: LatencyHistogram::default(),
             tracks_text: String::new(),
             record: RecordHealth::default(),
