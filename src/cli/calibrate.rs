@@ -4,11 +4,14 @@
 
 use super::{UsageError, write_stdout};
 use crate::calib::{self, Options, Reference, Residual};
-use crate::geometry::{Camera, Intrinsics, Pixel, WorldPoint};
+use crate::geometry::Intrinsics;
 use crate::sequence::{CameraMeta, ReferenceObject};
 use anyhow::Context;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+
+mod overlay;
+use overlay::overlay;
 
 /// Arguments of `fme calibrate`.
 #[derive(Debug, clap::Args)]
@@ -147,18 +150,7 @@ fn read_frame(path: &Path) -> anyhow::Result<image::RgbImage> {
 
 /// Runs `fme calibrate`.
 pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
-    if !(args.max_rms.is_finite() && args.max_rms > 0.0) {
-        return Err(usage(format!("--max-rms must be a positive number of pixels, got {}", args.max_rms)));
-    }
-    if !(args.click_px.is_finite() && args.click_px > 0.0) {
-        return Err(usage(format!("--click-px must be a positive number of pixels, got {}", args.click_px)));
-    }
-    if !(args.tape_m.is_finite() && args.tape_m > 0.0) {
-        return Err(usage(format!("--tape-m must be a positive length in metres, got {}", args.tape_m)));
-    }
-    if !(args.ref_size.is_finite() && args.ref_size >= 0.0) {
-        return Err(usage(format!("--ref-size must be 0 or a positive length in metres, got {}", args.ref_size)));
-    }
+    check_numbers(&args)?;
     let frame = match &args.source {
         Some(dev) => grab(dev, &args.config, &args.frame)?,
         None => read_frame(&args.frame)?,
@@ -183,7 +175,37 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     if let Some(calib_path) = &args.check {
         return check(calib_path, &refs, &opts, &frame, args.overlay.as_deref());
     }
-    let intrinsics = match (&args.intrinsics, args.fx, args.fy, args.cx, args.cy) {
+    let intrinsics = given_intrinsics(&args)?;
+    let sol =
+        calib::calibrate(&refs, intrinsics.as_ref(), &opts).map_err(|e| usage(format!("{}: {e}", points.display())))?;
+    let out = args.out.as_deref().ok_or_else(|| usage("--out is required"))?;
+    write_calibration(out, &calibration_file(&args, points, &refs, &sol, &opts))?;
+    if let Some(p) = &args.overlay {
+        overlay(frame, &sol.camera, &refs, &sol.residuals, p)?;
+    }
+    write_stdout(&summary(&args, &refs, &sol, out))
+}
+
+/// The numeric flags, each checked before anything is read.
+fn check_numbers(args: &CalibrateArgs) -> anyhow::Result<()> {
+    if !(args.max_rms.is_finite() && args.max_rms > 0.0) {
+        return Err(usage(format!("--max-rms must be a positive number of pixels, got {}", args.max_rms)));
+    }
+    if !(args.click_px.is_finite() && args.click_px > 0.0) {
+        return Err(usage(format!("--click-px must be a positive number of pixels, got {}", args.click_px)));
+    }
+    if !(args.tape_m.is_finite() && args.tape_m > 0.0) {
+        return Err(usage(format!("--tape-m must be a positive length in metres, got {}", args.tape_m)));
+    }
+    if !(args.ref_size.is_finite() && args.ref_size >= 0.0) {
+        return Err(usage(format!("--ref-size must be 0 or a positive length in metres, got {}", args.ref_size)));
+    }
+    Ok(())
+}
+
+/// The intrinsics from --intrinsics or --fx --fy --cx --cy; `None`: estimate them.
+fn given_intrinsics(args: &CalibrateArgs) -> anyhow::Result<Option<Intrinsics>> {
+    Ok(match (&args.intrinsics, args.fx, args.fy, args.cx, args.cy) {
         (Some(p), ..) => Some(read_intrinsics(p)?),
         (None, Some(fx), Some(fy), Some(cx), Some(cy)) => {
             let k = Intrinsics { fx, fy, cx, cy, distortion: [0.0; 5] };
@@ -191,11 +213,19 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
             Some(k)
         }
         _ => None,
-    };
-    let sol =
-        calib::calibrate(&refs, intrinsics.as_ref(), &opts).map_err(|e| usage(format!("{}: {e}", points.display())))?;
-    let out = args.out.as_deref().ok_or_else(|| usage("--out is required"))?;
-    let cam = sol.camera;
+    })
+}
+
+/// The calibration file: the solved camera, the references as reference objects (a cube's centre
+/// half an edge behind its measured face, away from the camera) and how it was made.
+fn calibration_file(
+    args: &CalibrateArgs,
+    points: &Path,
+    refs: &[Reference],
+    sol: &calib::Solution,
+    opts: &Options,
+) -> CalibrationOut {
+    let cam = &sol.camera;
     let centre = cam.pose.camera_center();
     let reference_objects = refs
         .iter()
@@ -211,10 +241,10 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
             }
         })
         .collect();
-    let file = CalibrationOut {
+    CalibrationOut {
         width: opts.width,
         height: opts.height,
-        camera: CameraMeta::from_camera(&cam),
+        camera: CameraMeta::from_camera(cam),
         reference_objects,
         calibrate: CalibrateInfo {
             frame: args.frame.display().to_string(),
@@ -227,18 +257,25 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
             error_px: sol.residuals.iter().map(|r| r.error_px).collect(),
             estimated_intrinsics: sol.estimated_intrinsics,
         },
-    };
-    let mut text = serde_json::to_string_pretty(&file).context("encoding the calibration")?;
+    }
+}
+
+/// Writes the calibration to `out` and reads it back through the loader the daemon uses, so a
+/// file that it would reject is caught here.
+fn write_calibration(out: &Path, file: &CalibrationOut) -> anyhow::Result<()> {
+    let mut text = serde_json::to_string_pretty(file).context("encoding the calibration")?;
     text.push('\n');
     // The path is what the user gave: a missing folder or no permission is a usage error (exit 2).
     std::fs::write(out, text).map_err(|e| usage(format!("--out {}: {e}", out.display())))?;
-    // Read back through the loader the daemon uses, so a file that it would reject is caught here.
     crate::calibration::load(out).map_err(|e| anyhow::anyhow!("the written calibration does not load: {e}"))?;
-    if let Some(p) = &args.overlay {
-        overlay(frame, &cam, &refs, &sol.residuals, p)?;
-    }
-    let mut s = table(&refs, &sol.residuals);
-    let k = &cam.intrinsics;
+    Ok(())
+}
+
+/// What is printed: the per-reference table, the RMS and the camera.
+fn summary(args: &CalibrateArgs, refs: &[Reference], sol: &calib::Solution, out: &Path) -> String {
+    let mut s = table(refs, &sol.residuals);
+    let k = &sol.camera.intrinsics;
+    let centre = sol.camera.pose.camera_center();
     let _ = writeln!(
         s,
         "RMS {:.2} px over {} references (limit {} px); start: {}",
@@ -260,7 +297,7 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
         if sol.estimated_intrinsics { " (estimated)" } else { "" }
     );
     let _ = writeln!(s, "wrote {}", out.display());
-    write_stdout(&s)
+    s
 }
 
 /// Grabs the sixth frame (after exposure settles) from a V4L2 camera or a recorded sequence
@@ -368,258 +405,5 @@ fn check(
             calib_path.display(),
             opts.max_rms_px
         )
-    }
-}
-
-/// Sets a pixel when it is inside the image.
-fn put(img: &mut image::RgbImage, x: i64, y: i64, c: [u8; 3]) {
-    if x >= 0 && y >= 0 && (x as u64) < u64::from(img.width()) && (y as u64) < u64::from(img.height()) {
-        img.put_pixel(x as u32, y as u32, image::Rgb(c));
-    }
-}
-
-/// A straight line (Bresenham), clipped to the image; far-off end points are skipped.
-fn line(img: &mut image::RgbImage, a: Pixel, b: Pixel, c: [u8; 3]) {
-    let lim = 4.0 * f64::from(img.width().max(img.height()));
-    if ![a.u, a.v, b.u, b.v].iter().all(|v| v.is_finite() && v.abs() < lim) {
-        return;
-    }
-    let (mut x0, mut y0, x1, y1) = (a.u.floor() as i64, a.v.floor() as i64, b.u.floor() as i64, b.v.floor() as i64);
-    let (dx, dy) = ((x1 - x0).abs(), -(y1 - y0).abs());
-    let (sx, sy) = (if x0 < x1 { 1 } else { -1 }, if y0 < y1 { 1 } else { -1 });
-    let mut err = dx + dy;
-    loop {
-        put(img, x0, y0, c);
-        if x0 == x1 && y0 == y1 {
-            break;
-        }
-        let e2 = 2 * err;
-        if e2 >= dy {
-            err += dy;
-            x0 += sx;
-        }
-        if e2 <= dx {
-            err += dx;
-            y0 += sy;
-        }
-    }
-}
-
-/// A line `a`-`b` 3 px wide with a dark outline (readable on any background).
-fn thick_line(img: &mut image::RgbImage, a: Pixel, b: Pixel, c: [u8; 3]) {
-    for (dx, dy) in [(-2.0, 0.0), (2.0, 0.0), (0.0, -2.0), (0.0, 2.0)] {
-        line(img, Pixel::new(a.u + dx, a.v + dy), Pixel::new(b.u + dx, b.v + dy), [0, 0, 0]);
-    }
-    for (dx, dy) in [(0.0, 0.0), (-1.0, 0.0), (1.0, 0.0), (0.0, -1.0), (0.0, 1.0)] {
-        line(img, Pixel::new(a.u + dx, a.v + dy), Pixel::new(b.u + dx, b.v + dy), c);
-    }
-}
-
-/// Where the world origin is drawn: at its pixel when in view, else an arrow at the image edge
-/// pointing towards it. `None` when the origin is at the camera itself.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum OriginMark {
-    /// In view, at this pixel.
-    InView(Pixel),
-    /// Out of view: the arrow's tip (on the edge, inset) and the unit direction it points.
-    Edge { tip: Pixel, dir: (f64, f64), behind: bool },
-}
-
-/// Inset of the origin arrow from the image edge, px.
-const EDGE_INSET: f64 = 12.0;
-
-fn origin_mark(cam: &Camera, w: u32, h: u32) -> Option<OriginMark> {
-    let (w, h) = (f64::from(w), f64::from(h));
-    let o = WorldPoint(nalgebra::Vector3::zeros());
-    let c = cam.pose.to_camera(&o).0;
-    let centre = (w / 2.0, h / 2.0);
-    let (dir, behind) = match cam.world_to_pixel(&o) {
-        Ok(p) if (0.0..w).contains(&p.u) && (0.0..h).contains(&p.v) => return Some(OriginMark::InView(p)),
-        Ok(p) => ((p.u - centre.0, p.v - centre.1), false),
-        // Behind the camera: turn the camera towards its x, y side.
-        Err(_) => ((c.x, c.y), true),
-    };
-    let n = dir.0.hypot(dir.1);
-    if !n.is_finite() || n < 1e-12 {
-        return None;
-    }
-    let d = (dir.0 / n, dir.1 / n);
-    // From the centre along d to the inset border.
-    let (hx, hy) = (centre.0 - EDGE_INSET, centre.1 - EDGE_INSET);
-    let t = [
-        if d.0.abs() > 1e-12 { hx / d.0.abs() } else { f64::INFINITY },
-        if d.1.abs() > 1e-12 { hy / d.1.abs() } else { f64::INFINITY },
-    ]
-    .into_iter()
-    .fold(f64::INFINITY, f64::min);
-    Some(OriginMark::Edge { tip: Pixel::new(centre.0 + d.0 * t, centre.1 + d.1 * t), dir: d, behind })
-}
-
-/// The overlay PNG: marked references (green crosses) with their name and error, reprojected (red
-/// circles) joined by a yellow line, the world axes, 1 m each (x red, y green, z blue, labelled),
-/// from the origin and from the references' centroid, the origin itself (or an arrow at the edge
-/// towards it), and a legend.
-fn overlay(
-    mut img: image::RgbImage,
-    cam: &Camera,
-    refs: &[Reference],
-    res: &[Residual],
-    path: &Path,
-) -> anyhow::Result<()> {
-    use crate::draw::{self, Placer, Rect};
-    use image::Rgb;
-    let (w, h) = img.dimensions();
-    let px = (h as f32 / 36.0).clamp(11.0, 24.0);
-    let mut placer = Placer::new(Rect::new(0, 0, i64::from(w), i64::from(h)));
-    let (_, lh) = draw::text_size("0", px);
-    let rms = (res.iter().map(|r| r.error_px * r.error_px).sum::<f64>() / res.len().max(1) as f64).sqrt();
-    let legend = [
-        ("+ marked reference: name, reprojection error".to_string(), [0, 255, 0]),
-        ("o where the calibration puts it (yellow: the error)".to_string(), [255, 80, 80]),
-        ("axes 1 m: x red, y green, z blue".to_string(), [255, 255, 255]),
-        (format!("RMS error {rms:.2} px over {} references", refs.len()), [255, 255, 255]),
-    ];
-    let lw = legend.iter().map(|(t, _)| draw::text_size(t, px).0).max().unwrap_or(0);
-    let legend_box = Rect::new(0, 0, lw + 10, legend.len() as i64 * (lh + 2) + 6);
-    placer.block(legend_box);
-    let mut labels: Vec<(Rect, String, [u8; 3])> = Vec::new();
-    // The axes from the world origin, and (the origin is often outside the view, at a cage corner)
-    // from the references' centroid.
-    let n = refs.len().max(1) as f64;
-    let centroid = refs.iter().fold(nalgebra::Vector3::zeros(), |a, r| a + r.world.0 / n);
-    for origin in [nalgebra::Vector3::zeros(), centroid] {
-        for (axis, colour, name) in [(0usize, [255, 0, 0], "x"), (1, [0, 255, 0], "y"), (2, [0, 128, 255], "z")] {
-            // Sampled in 3D so the part of an axis behind the camera is left out.
-            let mut prev: Option<Pixel> = None;
-            let mut end = None;
-            for k in 0..=100 {
-                let mut p = origin;
-                p[axis] += f64::from(k) / 100.0;
-                let px = cam.world_to_pixel(&WorldPoint(p)).ok();
-                if let (Some(a), Some(b)) = (prev, px) {
-                    thick_line(&mut img, a, b, colour);
-                }
-                prev = px;
-                end = px.or(end);
-            }
-            if let Some(e) = end {
-                let anchor = Rect::new(e.u as i64 - 3, e.v as i64 - 3, 7, 7);
-                let text = format!("{name} 1m");
-                let (tw, th) = draw::text_size(&text, px);
-                if let Some(r) = placer.place(&draw::place::candidates(anchor, tw, th, 2), &[]) {
-                    labels.push((r, text, colour));
-                }
-            }
-        }
-    }
-    for (r, e) in refs.iter().zip(res) {
-        let m = r.pixel;
-        if let Some(p) = e.projected {
-            line(&mut img, m, p, [255, 255, 0]);
-            for k in 0..48 {
-                let a = f64::from(k) * std::f64::consts::TAU / 48.0;
-                for (rad, c) in [(6.0, [0, 0, 0]), (5.0, [255, 0, 0]), (4.0, [0, 0, 0])] {
-                    put(&mut img, (p.u + rad * a.cos()).floor() as i64, (p.v + rad * a.sin()).floor() as i64, c);
-                }
-            }
-        }
-        draw::cross(&mut img, m.u.floor() as i64, m.v.floor() as i64, 6, Rgb([0, 255, 0]));
-    }
-    let marks: Vec<Rect> = refs.iter().map(|r| Rect::new(r.pixel.u as i64 - 7, r.pixel.v as i64 - 7, 15, 15)).collect();
-    for ((r, e), m) in refs.iter().zip(res).zip(&marks) {
-        let text = format!("{} {:.1} px", r.name, e.error_px);
-        let (tw, th) = draw::text_size(&text, px);
-        let c = if e.error_px > 3.0 { [255, 120, 120] } else { [120, 255, 120] };
-        if let Some(b) = placer.place(&draw::place::candidates(*m, tw, th, 3), &marks) {
-            labels.push((b, text, c));
-        }
-    }
-    match origin_mark(cam, w, h) {
-        Some(OriginMark::InView(p)) => {
-            draw::cross(&mut img, p.u as i64, p.v as i64, 9, Rgb([255, 0, 255]));
-            let text = "origin (0,0,0)".to_string();
-            let (tw, th) = draw::text_size(&text, px);
-            if let Some(b) = placer
-                .place(&draw::place::candidates(Rect::new(p.u as i64 - 9, p.v as i64 - 9, 19, 19), tw, th, 3), &[])
-            {
-                labels.push((b, text, [255, 0, 255]));
-            }
-        }
-        Some(OriginMark::Edge { tip, dir, behind }) => {
-            let len = 40.0;
-            let tail = Pixel::new(tip.u - dir.0 * len, tip.v - dir.1 * len);
-            thick_line(&mut img, tail, tip, [255, 0, 255]);
-            for a in [-0.5f64, 0.5] {
-                // The arrow head: the backward direction turned by +-0.5 rad.
-                let (bx, by) = (-dir.0 * a.cos() + dir.1 * a.sin(), -dir.0 * a.sin() - dir.1 * a.cos());
-                thick_line(&mut img, tip, Pixel::new(tip.u + bx * 14.0, tip.v + by * 14.0), [255, 0, 255]);
-            }
-            let text = if behind { "origin (behind the camera)" } else { "origin (out of view)" }.to_string();
-            let (tw, th) = draw::text_size(&text, px);
-            let anchor = Rect::new(
-                tail.u.min(tip.u) as i64,
-                tail.v.min(tip.v) as i64,
-                (tail.u - tip.u).abs() as i64,
-                (tail.v - tip.v).abs() as i64,
-            );
-            let mut cands = draw::place::candidates(anchor, tw, th, 4).to_vec();
-            // Pulled inside the image when the arrow hugs an edge.
-            cands.extend(
-                cands
-                    .clone()
-                    .into_iter()
-                    .map(|r| Rect::new(r.x.clamp(0, i64::from(w) - tw), r.y.clamp(0, i64::from(h) - th), tw, th)),
-            );
-            if let Some(b) = placer.place(&cands, &[]) {
-                labels.push((b, text, [255, 0, 255]));
-            }
-        }
-        None => {}
-    }
-    for (b, text, c) in &labels {
-        draw::draw_text(&mut img, b.x, b.y, text, px, Rgb(*c), Some(draw::OUTLINE));
-    }
-    draw::fill_rect(&mut img, legend_box, Rgb([0, 0, 0]), 0.65);
-    for (i, (t, c)) in legend.iter().enumerate() {
-        draw::draw_text(&mut img, 5, 3 + i as i64 * (lh + 2), t, px, Rgb(*c), None);
-    }
-    img.save_with_format(path, image::ImageFormat::Png).map_err(|e| usage(format!("--overlay {}: {e}", path.display())))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::geometry::Pose;
-
-    fn cam(eye: (f64, f64, f64), target: (f64, f64, f64)) -> Camera {
-        let pose = Pose::look_at(
-            WorldPoint::new(eye.0, eye.1, eye.2),
-            WorldPoint::new(target.0, target.1, target.2),
-            nalgebra::Vector3::z(),
-        )
-        .expect("pose");
-        Camera { intrinsics: Intrinsics::from_hfov(640, 480, 90.0).expect("intrinsics"), pose }
-    }
-
-    #[test]
-    fn origin_marked_in_view_or_by_an_arrow_at_the_edge() {
-        // Looking at the origin from 5 m: in view, at the centre.
-        match origin_mark(&cam((0.0, -5.0, 0.0), (0.0, 0.0, 0.0)), 640, 480) {
-            Some(OriginMark::InView(p)) => assert!((p.u - 320.0).abs() < 1e-6 && (p.v - 240.0).abs() < 1e-6),
-            other => panic!("{other:?}"),
-        }
-        // The origin 10 m to the left at 5 m: an arrow on the left edge pointing left.
-        match origin_mark(&cam((10.0, -5.0, 0.0), (10.0, 0.0, 0.0)), 640, 480) {
-            Some(OriginMark::Edge { tip, dir, behind: false }) => {
-                assert!((tip.u - EDGE_INSET).abs() < 1e-6 && (tip.v - 240.0).abs() < 1e-6, "{tip:?}");
-                assert!(dir.0 < -0.99, "{dir:?}");
-            }
-            other => panic!("{other:?}"),
-        }
-        // Behind the camera and below: an arrow on the bottom edge, said to be behind.
-        match origin_mark(&cam((0.0, 5.0, 3.0), (0.0, 10.0, 3.0)), 640, 480) {
-            Some(OriginMark::Edge { tip, behind: true, .. }) => assert!((tip.v - (480.0 - EDGE_INSET)).abs() < 1e-6),
-            other => panic!("{other:?}"),
-        }
     }
 }
