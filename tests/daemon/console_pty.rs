@@ -186,7 +186,18 @@ fn each_view_shows_one_update_and_regs_are_decoded() {
         });
         h.last_sample_at = Some(Instant::now());
         h.stage.tracks = 23;
-        h.tracks_text = (1..=3).map(|i| format!("id {i:>4} t 8.90 s box (10,10) 5x3 px depth - speed -\n")).collect();
+        h.fish = (1..=3)
+            .map(|id| fme::motion::Fish {
+                id,
+                last_seen: fme::units::Seconds(8.9),
+                bbox: fme::geometry::PixelBox::from_center(fme::geometry::Pixel::new(10.0, 10.0), 5.0, 3.0),
+                depth_measured: None,
+                depth: None,
+                position: None,
+                speed: None,
+                length: None,
+            })
+            .collect();
     });
     let hist = tempfile::tempdir().expect("tempdir");
     shared.history.set_dir(hist.path());

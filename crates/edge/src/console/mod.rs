@@ -186,7 +186,8 @@ impl Session {
             ("tracks", None, _) => {
                 // The count is of the rows shown: both are of the same update (the pipeline
                 // writes the list at the output rate; its per-frame count may be newer).
-                let text = shared.health().tracks_text;
+                let mut text = String::new();
+                tracks::describe_fish(&mut text, &shared.health().fish, TRACK_ROWS);
                 let rows: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
                 let _ = write!(body, "tracks {}", rows.len());
                 if rows.len() >= TRACK_ROWS {

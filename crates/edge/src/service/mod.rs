@@ -14,21 +14,26 @@
 //!
 //! [`build_pipeline`] returns the pipeline `fme run` uses ([`fme_core::pipeline::FishPipeline`]).
 
+mod capture_loop;
 pub mod config;
+mod pipeline_loop;
 pub mod publish;
 pub mod signals;
+pub mod subsystem;
 pub mod timing;
 
-use crate::capture::{Backoff, CaptureError, FrameQueue, FrameSource};
+use crate::capture::{CaptureError, FrameSource};
 use crate::config::Config;
 use crate::output::bank::RegisterBank;
 use crate::output::roles::RoleError;
 use crate::status::Shared;
 use fme_core::pipeline::{FishPipeline, Pipeline};
+use pipeline_loop::PipelineCtx;
 use publish::{Publish, Publisher, publish_and_send};
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
+use subsystem::Subsystem;
 use tracing::Level;
 
 /// Errors starting the daemon (everything after start-up is logged and retried instead).
@@ -144,9 +149,8 @@ pub struct Daemon {
     server_tasks: Vec<tokio::task::JoinHandle<()>>,
     client_task: Option<tokio::task::JoinHandle<()>>,
     metrics: Option<crate::output::metrics_http::MetricsServer>,
-    aux_tasks: Vec<tokio::task::JoinHandle<()>>,
-    pipeline_thread: Option<std::thread::JoinHandle<()>>,
-    other_threads: Vec<std::thread::JoinHandle<()>>,
+    /// Every thread and task, each stopped by the shutdown (tasks first).
+    parts: Vec<Subsystem>,
     finished: tokio::sync::watch::Receiver<bool>,
     serial_tx: Option<std::sync::mpsc::SyncSender<String>>,
 }
@@ -158,304 +162,6 @@ impl std::fmt::Debug for Daemon {
             .field("metrics_addr", &self.metrics_addr())
             .finish_non_exhaustive()
     }
-}
-
-/// Sleeps `d` in small steps, returning early (true) when a stop is requested.
-fn sleep_unless_stopping(shared: &Shared, d: Duration) -> bool {
-    let end = Instant::now() + d;
-    while Instant::now() < end {
-        if shared.stopping() {
-            return true;
-        }
-        std::thread::sleep((end - Instant::now()).min(Duration::from_millis(50)));
-    }
-    shared.stopping()
-}
-
-/// The message of a caught panic.
-fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
-    let msg = p.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| p.downcast_ref::<String>().cloned());
-    format!("panicked: {}", msg.unwrap_or_else(|| "(no message)".into()))
-}
-
-/// Runs the capture loop, restarting it (after the reconnect backoff) if a source panics.
-fn capture_thread(
-    mut source: Box<dyn FrameSource>,
-    queue: Arc<FrameQueue>,
-    shared: Arc<Shared>,
-    backoff: Backoff,
-    size: SizeLimit,
-) {
-    loop {
-        let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            capture_loop(&mut source, &queue, &shared, backoff, size);
-        }));
-        match run {
-            Ok(()) => return,
-            Err(p) => {
-                shared.with_health(|h| {
-                    h.camera_ok = false;
-                    h.capture_errors += 1;
-                });
-                shared.log(Level::ERROR, format!("capture {}; restarting capture", panic_text(&*p)));
-                let mut b = backoff;
-                if sleep_unless_stopping(&shared, b.next_delay()) {
-                    queue.close();
-                    return;
-                }
-                if let Err(e) = source.reopen() {
-                    shared.log(Level::WARN, format!("camera reconnect failed: {e}"));
-                }
-            }
-        }
-    }
-}
-
-/// `source.max_pixels` and the configured size ([`crate::capture::Frame::check_size`]).
-#[derive(Debug, Clone, Copy)]
-struct SizeLimit {
-    max_pixels: u64,
-    configured: (u32, u32),
-}
-
-fn capture_loop(
-    source: &mut Box<dyn FrameSource>,
-    queue: &FrameQueue,
-    shared: &Shared,
-    mut backoff: Backoff,
-    size: SizeLimit,
-) {
-    let mut window_start = Instant::now();
-    let mut window_frames = 0u32;
-    let mut oversized = 0u64;
-    let paced = source.paced();
-    while !shared.stopping() {
-        match source.next_frame(queue.take_buffer()) {
-            Ok(frame) => {
-                backoff.reset();
-                // Checked from the header before anything decodes it: a bad frame, not a decode.
-                if let Err(e) = frame.check_size(size.max_pixels, size.configured) {
-                    oversized += 1;
-                    shared.with_health(|h| h.capture_errors += 1);
-                    if oversized == 1 || oversized.is_multiple_of(100) {
-                        shared.log(Level::WARN, format!("bad frame #{oversized} dropped: {e}"));
-                    }
-                    queue.recycle(frame.data);
-                    continue;
-                }
-                let now = frame.arrived;
-                if paced {
-                    if let Some(old) = queue.push(frame) {
-                        queue.recycle(old.data);
-                    }
-                } else {
-                    let mut f = frame;
-                    while let Err(back) = queue.push_wait(f, Duration::from_millis(100)) {
-                        if shared.stopping() || queue.is_closed() {
-                            break;
-                        }
-                        f = back;
-                    }
-                }
-                let dropped = queue.stats().dropped + source.source_dropped();
-                window_frames += 1;
-                let elapsed = now.saturating_duration_since(window_start).as_secs_f64();
-                shared.with_health(|h| {
-                    h.camera_ok = true;
-                    h.frames_captured += 1;
-                    h.frames_dropped = dropped;
-                    if elapsed >= 1.0 {
-                        h.camera_fps = f64::from(window_frames) / elapsed;
-                    }
-                });
-                if elapsed >= 1.0 {
-                    window_start = now;
-                    window_frames = 0;
-                }
-            }
-            Err(CaptureError::End) => {
-                shared.log(Level::INFO, format!("{}: end of recording", source.describe()));
-                break;
-            }
-            Err(e) => {
-                shared.with_health(|h| {
-                    h.camera_ok = false;
-                    h.camera_fps = 0.0;
-                    h.capture_errors += 1;
-                });
-                shared.log(Level::WARN, format!("camera: {e}"));
-                loop {
-                    let d = backoff.next_delay();
-                    if sleep_unless_stopping(shared, d) {
-                        break;
-                    }
-                    match source.reopen() {
-                        Ok(()) => {
-                            shared.with_health(|h| {
-                                h.reconnects += 1;
-                                h.source = source.describe();
-                            });
-                            shared.log(Level::INFO, format!("camera back: {}", source.describe()));
-                            window_start = Instant::now();
-                            window_frames = 0;
-                            break;
-                        }
-                        Err(e) => shared.log(Level::WARN, format!("camera reconnect failed: {e}")),
-                    }
-                }
-            }
-        }
-    }
-    queue.close();
-}
-
-struct PipelineCtx {
-    pipeline: Box<dyn Pipeline>,
-    queue: Arc<FrameQueue>,
-    shared: Arc<Shared>,
-    publisher: Arc<Mutex<Publisher>>,
-    serial_tx: Option<std::sync::mpsc::SyncSender<String>>,
-    output_period_s: f64,
-    max_frames: Option<u64>,
-    series: Option<std::sync::mpsc::SyncSender<crate::sequence::SeriesRow>>,
-    series_dropped: u64,
-    watchdog: Option<Duration>,
-    finished: tokio::sync::watch::Sender<bool>,
-    recorder: Option<crate::record::Recorder>,
-}
-
-fn pipeline_loop(mut c: PipelineCtx) {
-    let mut next_out: Option<f64> = None;
-    let mut last_ping: Option<Instant> = None;
-    let mut processed = 0u64;
-    let mut errors = 0u64;
-    let mut tracks = String::with_capacity(1024);
-    // Copies of the last outcome's fish (console `tracks`) and overlays (the recorder), allocated once.
-    let mut fish = Vec::with_capacity(fme_core::motion::MAX_FISH);
-    let mut overlays = crate::record::Overlays::default();
-    let mut fit_state = fme_core::pipeline::DepthFitState::default();
-    while !c.shared.stopping() {
-        if let Some(wd) = c.watchdog
-            && last_ping.is_none_or(|t| t.elapsed() >= wd / 2)
-        {
-            let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
-            last_ping = Some(Instant::now());
-        }
-        let Some(frame) = c.queue.pop(Duration::from_millis(100)) else {
-            if let Some(r) = c.recorder.as_mut() {
-                r.watch(None, errors);
-            }
-            if c.queue.is_closed() && c.queue.is_empty() {
-                break;
-            }
-            continue;
-        };
-        // A panic in a stage on one bad frame must not end the pipeline: count it as an error. The
-        // outcome borrows the pipeline: what the loop keeps of it is copied out here.
-        let (fish, overlays, record) = (&mut fish, &mut overlays, c.recorder.is_some());
-        let result = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            c.pipeline.process(&frame).map(|o| {
-                fish.clear();
-                fish.extend_from_slice(o.fish);
-                if record {
-                    overlays.copy_from(&o);
-                }
-                (o.sample, o.fit)
-            })
-        })) {
-            Ok(r) => r,
-            Err(p) => Err(fme_core::pipeline::PipelineError::Stage { stage: "pipeline", message: panic_text(&*p) }),
-        };
-        let now = Instant::now();
-        processed += 1;
-        let mut due = false;
-        let ts = frame.timestamp.get();
-        let stage = c.pipeline.health();
-        match &result {
-            Ok((_, fit)) => fit_state = *fit,
-            Err(_) => overlays.clear(),
-        }
-        let sample = match result.map(|(s, _)| s) {
-            Ok(s) => {
-                if let (Some(tx), Some(sample)) = (&c.series, s) {
-                    // The writer thread has the disk; the pipeline never waits on it.
-                    let row = crate::sequence::SeriesRow { frame: frame.seq + 1, sample };
-                    match tx.try_send(row) {
-                        Ok(()) => {}
-                        Err(std::sync::mpsc::TrySendError::Full(_)) => {
-                            c.series_dropped += 1;
-                            if c.series_dropped == 1 || c.series_dropped.is_multiple_of(1000) {
-                                c.shared.log(
-                                    Level::WARN,
-                                    format!("--series: {} rows dropped (disk slow)", c.series_dropped),
-                                );
-                            }
-                        }
-                        Err(std::sync::mpsc::TrySendError::Disconnected(_)) => c.series = None,
-                    }
-                }
-                s
-            }
-            Err(e) => {
-                errors += 1;
-                // First error and then every 100th: a flood of bad frames must not flood the journal.
-                if errors == 1 || errors.is_multiple_of(100) {
-                    c.shared.log(Level::WARN, format!("pipeline error #{errors}: {e}"));
-                }
-                None
-            }
-        };
-        if let Some(r) = c.recorder.as_mut() {
-            // Never waits: a full queue drops the frame from the recording (counted).
-            r.after_frame(&frame, overlays, &*c.pipeline, sample);
-            r.watch(sample.as_ref(), errors);
-        }
-        if sample.is_some() {
-            let next = next_out.get_or_insert(ts);
-            if ts + 1e-9 >= *next || ts < *next - 2.0 * c.output_period_s {
-                due = true;
-                // Next slot on the frame clock; resynchronise after gaps or a clock jump.
-                *next = if ts - *next > c.output_period_s || ts < *next - 2.0 * c.output_period_s {
-                    ts + c.output_period_s
-                } else {
-                    *next + c.output_period_s
-                };
-            }
-        }
-        if due {
-            tracks.clear();
-            crate::console::tracks::describe_fish(&mut tracks, fish, crate::console::TRACK_ROWS);
-        }
-        c.shared.with_health(|h| {
-            h.frames_processed = processed;
-            h.pipeline_errors = errors;
-            h.last_processed_at = Some(now);
-            h.stage = stage;
-            h.fit_state = fit_state;
-            if let Some(s) = sample {
-                h.last_sample = Some(s);
-                h.last_sample_at = Some(now);
-            }
-            if due {
-                std::mem::swap(&mut h.tracks_text, &mut tracks);
-            }
-        });
-        if due {
-            publish_and_send(&c.publisher, &c.shared, c.serial_tx.as_ref(), Publish::Update);
-            let ms = frame.arrived.elapsed().as_secs_f64() * 1000.0;
-            c.shared.with_health(|h| h.latency.record(ms));
-        }
-        c.queue.recycle(frame.data);
-        if c.max_frames.is_some_and(|m| processed >= m) {
-            c.shared.log(Level::INFO, format!("processed {processed} frames: stopping as asked"));
-            break;
-        }
-    }
-    drop(c.series.take()); // the writer thread drains what is queued and finishes the file
-    if let Some(r) = c.recorder.as_mut() {
-        r.close();
-    }
-    let _ = c.finished.send(true);
 }
 
 impl Daemon {
@@ -490,132 +196,49 @@ impl Daemon {
             shared.log(Level::WARN, note);
         }
         let publisher = Arc::new(Mutex::new(Publisher::new(&cfg, &timing, bank.clone())));
-        let mut other_threads = Vec::new();
-        if let Some(dir) = history_dir(&cfg) {
-            let h = &cfg.history;
-            let (tx, thread) = crate::history::spawn(dir.clone(), h.keep_days, h.fsync_s, shared.clone())
-                .map_err(|error| ServiceError::Spawn { what: "history", error })?;
-            publisher.lock().unwrap_or_else(|p| p.into_inner()).set_history(Some(tx));
-            other_threads.push(thread);
-            shared.log(Level::INFO, format!("history: one row per update in {}", dir.display()));
-        }
+        // Threads and tasks, in start order; the shutdown stops the tasks first, then the threads.
+        let mut parts: Vec<Subsystem> = Vec::new();
+        parts.extend(subsystem::start_history(&cfg, &shared, &publisher)?);
         // Publish a first block at once so a PLC never reads all zeros from a running box.
         publish_and_send(&publisher, &shared, None, Publish::Update);
-        if cfg.output.mqtt.enabled {
-            // After the first block: the broker hears from the box once its capture runs.
-            let (tx, thread) = crate::output::mqtt::spawn(&cfg, shared.clone())
-                .map_err(|error| ServiceError::Spawn { what: "mqtt", error })?;
-            publisher.lock().unwrap_or_else(|p| p.into_inner()).set_mqtt(Some(tx));
-            other_threads.push(thread);
-        }
-
+        // After the first block: the broker hears from the box once its capture runs.
+        parts.extend(subsystem::start_mqtt(&cfg, &shared, &publisher)?);
         let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
         let roles = crate::output::roles::spawn(&cfg, &bank, &shared, stop_rx).await?;
         let modbus_addr = roles.modbus_addr;
         let (server_stops, server_tasks, client_task) = (roles.server_stops, roles.server_tasks, roles.client_task);
         let serial_tx = roles.serial_tx;
-        other_threads.extend(roles.serial_thread);
+        parts.extend(roles.serial_thread.map(Subsystem::Thread));
         // The Prometheus endpoint: a port it cannot bind is logged and shown, never fatal.
         let metrics = crate::output::metrics_http::spawn(&cfg.output.metrics, timing.stale_after, &shared, &bank).await;
-        if cfg.console.enabled {
-            let (dev, baud, echo, sh, bk) =
-                (cfg.console.device.clone(), cfg.console.baud, cfg.console.echo, shared.clone(), bank.clone());
-            other_threads.push(
-                std::thread::Builder::new()
-                    .name("fme-console".into())
-                    .spawn(move || crate::console::run_on_device(&dev, baud, echo, &sh, &bk))
-                    .map_err(|error| ServiceError::Spawn { what: "console", error })?,
-            );
-        }
-
-        let queue = Arc::new(FrameQueue::new(cfg.source.queue_frames));
-        let backoff = Backoff::new(
-            Duration::from_millis(cfg.source.reconnect_min_ms),
-            Duration::from_millis(cfg.source.reconnect_max_ms),
-        );
-        let (q, sh) = (queue.clone(), shared.clone());
-        let size = SizeLimit { max_pixels: cfg.source.max_pixels, configured: (cfg.source.width, cfg.source.height) };
-        other_threads.push(
-            std::thread::Builder::new()
-                .name("fme-capture".into())
-                .spawn(move || capture_thread(source, q, sh, backoff, size))
-                .map_err(|error| ServiceError::Spawn { what: "capture", error })?,
-        );
-        let watchdog = if cfg.service.systemd_notify { sd_notify::watchdog_enabled() } else { None };
-        // `--series`: a writer thread with a bounded queue, so the pipeline never waits on the disk.
-        let series = match series_file {
-            Some(mut w) => {
-                let (tx, rx) = std::sync::mpsc::sync_channel::<crate::sequence::SeriesRow>(4096);
-                let sh = shared.clone();
-                other_threads.push(
-                    std::thread::Builder::new()
-                        .name("fme-series".into())
-                        .spawn(move || {
-                            let result = rx.iter().try_for_each(|row| w.write(&row)).and_then(|()| w.finish());
-                            if let Err(e) = result {
-                                sh.log(Level::ERROR, format!("--series: {e}; no more rows are written"));
-                            }
-                        })
-                        .map_err(|error| ServiceError::Spawn { what: "series writer", error })?,
-                );
-                Some(tx)
-            }
-            None => None,
-        };
+        parts.extend(subsystem::start_console(&cfg, &shared, &bank)?);
+        let (queue, capture) = subsystem::start_capture(&cfg, source, &shared)?;
+        parts.push(capture);
+        let (series, series_thread) = subsystem::start_series(series_file, &shared)?;
+        parts.extend(series_thread);
         let (finished_tx, finished) = tokio::sync::watch::channel(false);
         let mut recorder = crate::record::Recorder::start(&cfg, timing.freeze_gap, shared.clone(), opts.ring_writer);
-        if let Some(t) = recorder.as_mut().and_then(crate::record::Recorder::take_thread) {
-            other_threads.push(t);
-        }
-        let ctx = PipelineCtx {
-            pipeline,
-            queue,
-            shared: shared.clone(),
-            publisher: publisher.clone(),
-            serial_tx: serial_tx.clone(),
-            output_period_s: timing.output_period.as_secs_f64(),
-            max_frames: opts.max_frames,
-            series,
-            series_dropped: 0,
-            watchdog,
-            finished: finished_tx,
-            recorder,
-        };
-        let pipeline_thread = Some(
-            std::thread::Builder::new()
-                .name("fme-pipeline".into())
-                .spawn(move || pipeline_loop(ctx))
-                .map_err(|error| ServiceError::Spawn { what: "pipeline", error })?,
+        parts.extend(recorder.as_mut().and_then(crate::record::Recorder::take_thread).map(Subsystem::Thread));
+        // The pipeline's thread is stopped first among the threads, as it was started last.
+        parts.insert(
+            0,
+            subsystem::start_pipeline(PipelineCtx {
+                pipeline,
+                queue,
+                shared: shared.clone(),
+                publisher: publisher.clone(),
+                serial_tx: serial_tx.clone(),
+                output_period_s: timing.output_period.as_secs_f64(),
+                max_frames: opts.max_frames,
+                series,
+                watchdog: if cfg.service.systemd_notify { sd_notify::watchdog_enabled() } else { None },
+                finished: finished_tx,
+                recorder,
+            })?,
         );
-
-        // Keepalive: with no samples (camera down, pipeline failing) the registers still update, so
-        // the PLC sees the heartbeat, the stale bit and the fault code.
-        let mut aux_tasks = Vec::new();
-        let period = timing.output_period;
-        let (sh, pb, stx) = (shared.clone(), publisher.clone(), serial_tx.clone());
-        aux_tasks.push(tokio::spawn(async move {
-            let mut tick = tokio::time::interval(period / 2);
-            loop {
-                tick.tick().await;
-                if sh.stopping() {
-                    return;
-                }
-                publish_and_send(&pb, &sh, stx.as_ref(), Publish::IfQuietFor(period + period / 2));
-            }
-        }));
-        if let Some(every) = timing.live_view {
-            let (sh, bk) = (shared.clone(), bank.clone());
-            aux_tasks.push(tokio::spawn(async move {
-                let mut tick = tokio::time::interval(every);
-                loop {
-                    tick.tick().await;
-                    if sh.stopping() {
-                        return;
-                    }
-                    eprint!("\r{}   ", crate::console::activity_line(&sh, &bk));
-                }
-            }));
-        }
+        let mut tasks = vec![subsystem::start_keepalive(timing.output_period, &shared, &publisher, serial_tx.clone())];
+        tasks.extend(subsystem::start_live_view(timing.live_view, &shared, &bank));
+        tasks.append(&mut parts);
         if cfg.service.systemd_notify {
             let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready, sd_notify::NotifyState::Status("running")]);
         }
@@ -630,9 +253,7 @@ impl Daemon {
             server_tasks,
             client_task,
             metrics,
-            aux_tasks,
-            pipeline_thread,
-            other_threads,
+            parts: tasks,
             finished,
             serial_tx,
         })
@@ -710,20 +331,11 @@ impl Daemon {
         if let Some(m) = self.metrics.take() {
             m.stop().await;
         }
-        for t in self.aux_tasks.drain(..) {
-            t.abort();
-        }
         self.serial_tx = None;
         // Threads notice `stopping` within ~100 ms; a camera blocked in the driver is not waited for.
         let deadline = Instant::now() + Duration::from_millis(400);
-        let mut threads: Vec<_> = self.pipeline_thread.take().into_iter().chain(self.other_threads.drain(..)).collect();
-        while Instant::now() < deadline && threads.iter().any(|t| !t.is_finished()) {
-            tokio::time::sleep(Duration::from_millis(10)).await;
-        }
-        for t in threads.drain(..) {
-            if t.is_finished() {
-                let _ = t.join();
-            }
+        for part in self.parts.drain(..) {
+            part.stop(deadline).await;
         }
         self.shared.log(Level::INFO, format!("stopped in {} ms", t0.elapsed().as_millis()));
     }

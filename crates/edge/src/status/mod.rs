@@ -112,8 +112,9 @@ pub struct Health {
     pub fit_state: DepthFitState,
     /// Frame-to-register latency.
     pub latency: LatencyHistogram,
-    /// Text of the current tracks (console `tracks`), refreshed at the output rate.
-    pub tracks_text: String,
+    /// The fish the estimator follows (console `tracks`; at most [`crate::console::TRACK_ROWS`]),
+    /// refreshed at the output rate.
+    pub fish: Vec<fme_core::motion::Fish>,
     /// The recorder (black box, snapshots).
     pub record: RecordHealth,
     /// Writes to the state directory in flight and the history's write state (status bit 7).
@@ -278,7 +279,7 @@ impl Health {
             stage: StageHealth::default(),
             fit_state: DepthFitState::default(),
             latency: LatencyHistogram::default(),
-            tracks_text: String::new(),
+            fish: Vec::new(),
             record: RecordHealth::default(),
             disk: DiskHealth::default(),
             mqtt: MqttHealth::default(),
