@@ -20,7 +20,7 @@
 //! for a reason of the scene: a dense school nests boxes, a dark hour lowers scores). The flag is
 //! raised after the windows have been out of range for `raise_after_s` without a break, and cleared
 //! after `clear_after_s` back in range (hysteresis, so it does not flicker). Time is frame time.
-//! Every run's summary is logged at trace level (`--log fme::familiarity=trace`): the ranges of
+//! Every run's summary is logged at trace level (`--log fme_core::familiarity=trace`): the ranges of
 //! another detector, or another window, can be measured from it offline.
 //!
 //! Fixed size: a ring of [`RUNS`] run summaries and a table of [`track::MAX_TRACKS`] track spans;
@@ -318,7 +318,7 @@ impl FamiliarityMonitor {
                 i += 1;
             }
         }
-        // One line per run (`--log fme::familiarity=trace`): what a window's statistics are made
+        // One line per run (`--log fme_core::familiarity=trace`): what a window's statistics are made
         // of, to measure the ranges of another detector or try another window offline.
         tracing::trace!(
             t,

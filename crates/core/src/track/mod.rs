@@ -6,9 +6,9 @@
 //! is reserved when the [`Tracker`] is created, and `predict`/`update` never allocate.
 //!
 //! ```
-//! use fme::geometry::PixelBox;
-//! use fme::track::{Detection, Tracker, TrackerConfig};
-//! use fme::units::Seconds;
+//! use fme_core::geometry::PixelBox;
+//! use fme_core::track::{Detection, Tracker, TrackerConfig};
+//! use fme_core::units::Seconds;
 //! let mut tracker = Tracker::new(TrackerConfig::default_preset());
 //! for k in 0..5 {
 //!     let det = Detection::new(PixelBox::new(10.0 + 2.0 * k as f64, 20.0, 30.0, 15.0), 0.9);
