@@ -23,7 +23,7 @@ pub use metrics::{DepthAccuracy, distance_correlation, quantile, rmse};
 pub use options::{DepthChoice, EvalOptions};
 pub use output::{write_series, write_tracks};
 pub use relative::RelativeGtParams;
-pub use report::{EvalReport, FishRow, MotSummary, RunHead, ScoredRow};
+pub use report::{EvalReport, FishRow, MotSummary, ScoredRow};
 pub use run::evaluate;
 
 use std::path::PathBuf;

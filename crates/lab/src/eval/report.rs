@@ -207,42 +207,21 @@ impl From<&MotMetrics> for MotSummary {
     }
 }
 
-/// What a run is, before any score: the report's head.
-#[derive(Debug, Clone)]
-pub struct RunHead {
-    /// Sequence folder.
-    pub sequence: String,
-    /// Box source.
-    pub boxes: String,
-    /// Depth source.
-    pub depth: DepthChoice,
-    /// Metric fit, with estimated depth.
-    pub fit: Option<FitMethod>,
-    /// Post-processing on.
-    pub postprocess: bool,
-    /// `depth.sample`.
-    pub depth_sample: DepthSample,
-    /// Detector and depth-network rates, Hz.
-    pub rates_hz: [f64; 2],
-    /// Speed span, s.
-    pub speed_span_s: f64,
-    /// The scores this run cannot give, and why.
-    pub absent: Vec<String>,
-}
-
 impl EvalReport {
-    /// A report with `head` and every score still to come (each scorer fills its own).
-    pub fn blank(head: RunHead) -> Self {
+    /// A report of the run on `sequence` with boxes from `boxes` and depth from `depth`, and every
+    /// score still to come (each scorer fills its own); the caller sets what the run is (`fit`,
+    /// `postprocess`, `depth_sample`, `rates_hz`, `speed_span_s`, `absent`).
+    pub fn blank(sequence: String, boxes: String, depth: DepthChoice) -> Self {
         let nan = f64::NAN;
         Self {
-            sequence: head.sequence,
-            boxes: head.boxes,
-            depth: head.depth,
-            fit: head.fit,
-            postprocess: head.postprocess,
-            depth_sample: head.depth_sample,
-            rates_hz: head.rates_hz,
-            speed_span_s: head.speed_span_s,
+            sequence,
+            boxes,
+            depth,
+            fit: None,
+            postprocess: false,
+            depth_sample: DepthSample::Centre,
+            rates_hz: [nan; 2],
+            speed_span_s: nan,
             frames: 0,
             speed_rmse_mps: nan,
             speed_rmse_now_mps: nan,
@@ -277,7 +256,7 @@ impl EvalReport {
             mean_activity_bls: nan,
             depth_consistency: None,
             depth_consistency_frames: 0,
-            absent: head.absent,
+            absent: Vec::new(),
             mot: None,
             detection: None,
             series: Vec::new(),

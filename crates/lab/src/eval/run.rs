@@ -11,7 +11,7 @@ use super::boxes::IndexedBoxes;
 use super::inputs::{BoxInput, DepthInput, GroundTruth};
 use super::live;
 use super::options::{DepthChoice, EvalOptions};
-use super::report::{EvalReport, RunHead};
+use super::report::EvalReport;
 use super::score::{
     ConsistencyScorer, DepthScorer, DetectionScorer, FamiliarityScorer, FishRows, FrameTruth, PipelineState, Scorer,
     SpeedScorer, TrackingScorer,
@@ -28,8 +28,8 @@ use fme_edge::sequence::Sequence;
 pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<EvalReport, EvalError> {
     check_inputs(seq, opts)?;
     let (cfg, calibration) = run_config(seq, cfg, opts)?;
-    let head = head(seq, &cfg, opts);
-    let mut scorers = scorers(seq, &cfg, opts, &head.boxes);
+    let mut report = blank_report(seq, &cfg, opts);
+    let mut scorers = scorers(seq, &cfg, opts, &report.boxes);
     let mut pipeline = pipeline(seq, &cfg, calibration, opts)?;
     let mut source = RecordedSource::open(&seq.dir, false, false)
         .map_err(|e| EvalError::Input { path: seq.dir.clone(), msg: e.to_string() })?;
@@ -72,7 +72,6 @@ pub fn evaluate(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<Eval
         }
         buf = frame_data.data;
     }
-    let mut report = EvalReport::blank(head);
     report.cpu_ms_per_frame = 1000.0 * cpu_s / samples.max(1) as f64;
     for s in scorers {
         s.finish(&mut report)?;
@@ -119,25 +118,22 @@ fn run_config(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> Result<(Confi
     Ok((cfg, calibration))
 }
 
-/// The report's head: what the run is.
-fn head(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> RunHead {
-    let estimated = opts.depth != DepthChoice::Gt;
-    RunHead {
-        sequence: seq.dir.display().to_string(),
-        boxes: match &opts.boxes {
-            BoxesChoice::Gt => "gt".to_string(),
-            BoxesChoice::Tracker => "tracker".to_string(),
-            BoxesChoice::Model => "model".to_string(),
-            BoxesChoice::File(p) => p.display().to_string(),
-        },
-        depth: opts.depth,
-        fit: estimated.then_some(cfg.depth.fit),
-        postprocess: cfg.postprocess.box_fluctuation || cfg.postprocess.depth_jump,
-        depth_sample: cfg.depth.sample,
-        rates_hz: [cfg.detector.rate_hz, cfg.depth.rate_hz],
-        speed_span_s: cfg.motion.speed_span_s.0,
-        absent: absent_scores(seq, opts, !seq.world.is_empty()),
-    }
+/// The report before any score: what the run is.
+fn blank_report(seq: &Sequence, cfg: &Config, opts: &EvalOptions) -> EvalReport {
+    let boxes = match &opts.boxes {
+        BoxesChoice::Gt => "gt".to_string(),
+        BoxesChoice::Tracker => "tracker".to_string(),
+        BoxesChoice::Model => "model".to_string(),
+        BoxesChoice::File(p) => p.display().to_string(),
+    };
+    let mut r = EvalReport::blank(seq.dir.display().to_string(), boxes, opts.depth);
+    r.fit = (opts.depth != DepthChoice::Gt).then_some(cfg.depth.fit);
+    r.postprocess = cfg.postprocess.box_fluctuation || cfg.postprocess.depth_jump;
+    r.depth_sample = cfg.depth.sample;
+    r.rates_hz = [cfg.detector.rate_hz, cfg.depth.rate_hz];
+    r.speed_span_s = cfg.motion.speed_span_s.0;
+    r.absent = absent_scores(seq, opts, !seq.world.is_empty());
+    r
 }
 
 /// The scorers this run can feed: each needs its truth and the stage it scores to run.
