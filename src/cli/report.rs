@@ -235,31 +235,38 @@ mod tests {
     #[test]
     fn time_range_follows_the_data_or_from_to_in_the_zone() {
         let dir = tempfile::tempdir().expect("tempdir");
-        let (d4, d5) = (day_ms("2030-01-14"), day_ms("2030-01-15"));
+        // Three consecutive UTC days, any will do; their names are written as the flags take them.
+        let day = history::day_of(0) + 21_000;
+        let (n4, n5, n6) = (history::day_name(day), history::day_name(day + 1), history::day_name(day + 2));
+        let (d4, d5) = (day_ms(&n4), day_ms(&n5));
         write(dir.path(), &[(d4 + 6 * H, d4 + 8 * H), (d5, d5 + 2 * H)]);
         let utc = TimeZone::UTC;
         // --day: the plot spans the day's rows.
-        let s = select(&args(dir.path(), Some("2030-01-14"), None, None), &utc).expect("day");
+        let s = select(&args(dir.path(), Some(&n4), None, None), &utc).expect("day");
         assert_eq!(s.range, (d4 + 6 * H, d4 + 8 * H - 600_000));
         assert_eq!(s.rows.len(), 12);
         // --from/--to in UTC: across the day files, `to` exclusive.
-        let a = args(dir.path(), None, Some("2030-01-14 07:00"), Some("2030-01-15T01:00"));
+        let (from, to) = (format!("{n4} 07:00"), format!("{n5}T01:00"));
+        let a = args(dir.path(), None, Some(&from), Some(&to));
         let s = select(&a, &utc).expect("range");
         assert_eq!(s.range, (d4 + 7 * H, d5 + H));
-        assert_eq!(s.rows.len(), 6 + 6, "07:00-08:00 on the 14th, 00:00-01:00 on the 15th");
-        // The same wall times in +05:30 are 5.5 h earlier: only the 14th's rows.
+        assert_eq!(s.rows.len(), 6 + 6, "07:00-08:00 on the first day, 00:00-01:00 on the second");
+        // The same wall times in +05:30 are 5.5 h earlier: only the first day's rows.
         let s = select(&a, &parse_tz("+05:30").expect("tz")).expect("range");
         assert_eq!(s.range, (d4 + 7 * H - 11 * H / 2, d5 + H - 11 * H / 2));
         assert_eq!(s.rows.len(), 12, "{:?}", s.range);
         // --from alone: one day; an instant with an offset ignores --tz.
-        let s = select(&args(dir.path(), None, Some("2030-01-14T23:00Z"), None), &utc).expect("from");
+        let instant = format!("{n4}T23:00Z");
+        let s = select(&args(dir.path(), None, Some(&instant), None), &utc).expect("from");
         assert_eq!(s.range, (d4 + 23 * H, d5 + 23 * H));
         // Empty or reversed stretches are errors naming the flags.
-        let e = select(&args(dir.path(), None, Some("2030-01-16"), None), &utc).expect_err("no rows");
+        let e = select(&args(dir.path(), None, Some(&n6), None), &utc).expect_err("no rows");
         assert!(e.to_string().contains("no history rows"), "{e}");
-        let e = select(&args(dir.path(), None, Some("2030-01-15"), Some("2030-01-14")), &utc).expect_err("reversed");
+        let e = select(&args(dir.path(), None, Some(&n5), Some(&n4)), &utc).expect_err("reversed");
         assert!(e.to_string().contains("not before --to"), "{e}");
-        assert!(parse_when("--from", "14.01.2030", &utc).is_err());
+        // Day first, dotted: not a form --from takes.
+        let (y, m, d) = (&n4[..4], &n4[5..7], &n4[8..]);
+        assert!(parse_when("--from", &format!("{d}.{m}.{y}"), &utc).is_err());
     }
 
     #[test]
