@@ -165,8 +165,6 @@ impl ScalePolicy {
         if map.kind() == MapKind::Depth {
             return;
         }
-        self.fish.clear();
-        self.fish.extend(fish);
         let (scale, ruler) = (self.cfg.scale, self.cfg.body_length);
         let refs = if points.is_empty() { References::new() } else { points.pairs(|px| map.point(px)) };
         let by_refs = match scale {
@@ -186,7 +184,7 @@ impl ScalePolicy {
                         // `auto` keeps looking at the fish, so they are rulers at once when the
                         // references go.
                         if let (DepthScale::Auto, Some(length)) = (scale, ruler) {
-                            self.fish_refit(t_s, map, intrinsics, length, refs, false);
+                            self.fish_refit(t_s, map, intrinsics, fish, length, refs, false);
                         }
                         return;
                     }
@@ -204,7 +202,7 @@ impl ScalePolicy {
         if scale == DepthScale::References {
             return;
         }
-        self.fish_refit(t_s, map, intrinsics, length, refs, true);
+        self.fish_refit(t_s, map, intrinsics, fish, length, refs, true);
     }
 
     /// Keeps a fit on the references.
@@ -238,15 +236,20 @@ impl ScalePolicy {
     /// pairs) are added. The cohort's length is `length`, or the one measured under the references'
     /// fit while they set the scale (`depth.learn_fish_length`, [`LengthLearner`]). With `fit` false
     /// (the references set the scale), the fish's looks are recorded and their length measured.
+    #[allow(clippy::too_many_arguments)]
     fn fish_refit(
         &mut self,
         t_s: f64,
         map: &dyn DepthGrid,
         intrinsics: &Intrinsics,
+        fish: impl IntoIterator<Item = Sighting>,
         length: Metres,
         refs: References,
         fit: bool,
     ) {
+        // Only the fish fit looks at the fish: collected here, not on every depth frame.
+        self.fish.clear();
+        self.fish.extend(fish);
         let learn = !fit && self.cfg.learn_length;
         let learned = self.learned_length.length().filter(|_| self.cfg.learn_length);
         let length = learned.unwrap_or(length);

@@ -93,7 +93,9 @@ impl LoopState {
 
     /// One frame: process it, hand what it produced on, update the health, publish when due.
     fn frame(&mut self, c: &mut PipelineCtx, frame: &Frame) {
-        let result = self.process(c, frame);
+        // The fish are copied out only on frames that may carry an update (the console reads them).
+        let may_publish = self.is_due(frame.timestamp.get(), c.output_period_s);
+        let result = self.process(c, frame, may_publish);
         let now = Instant::now();
         self.processed += 1;
         let ts = frame.timestamp.get();
@@ -142,12 +144,19 @@ impl LoopState {
 
     /// Runs the pipeline on `frame` and copies out what the loop keeps of its outcome (the outcome
     /// borrows the pipeline). A panic in a stage on one bad frame is an error, not the end.
-    fn process(&mut self, c: &mut PipelineCtx, frame: &Frame) -> Result<Option<ActivitySample>, PipelineError> {
+    fn process(
+        &mut self,
+        c: &mut PipelineCtx,
+        frame: &Frame,
+        keep_fish: bool,
+    ) -> Result<Option<ActivitySample>, PipelineError> {
         let (fish, overlays, record) = (&mut self.fish, &mut self.overlays, c.recorder.is_some());
         let result = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             c.pipeline.process(frame).map(|o| {
-                fish.clear();
-                fish.extend_from_slice(o.fish);
+                if keep_fish {
+                    fish.clear();
+                    fish.extend_from_slice(o.fish);
+                }
                 if record {
                     overlays.copy_from(&o);
                 }
@@ -184,14 +193,20 @@ impl LoopState {
         }
     }
 
-    /// Whether an output update is due at frame time `ts`: the next slot on the frame clock,
-    /// resynchronised after gaps or a clock jump.
+    /// Whether frame time `ts` reaches the next update slot (or jumped back before it).
+    fn is_due(&self, ts: f64, period: f64) -> bool {
+        let next = self.next_out.unwrap_or(ts);
+        ts + 1e-9 >= next || ts < next - 2.0 * period
+    }
+
+    /// Whether an output update is due at frame time `ts`, and if so, the next slot on the frame
+    /// clock, resynchronised after gaps or a clock jump.
     fn update_due(&mut self, ts: f64, period: f64) -> bool {
-        let next = self.next_out.get_or_insert(ts);
-        if ts + 1e-9 >= *next || ts < *next - 2.0 * period {
-            *next = if ts - *next > period || ts < *next - 2.0 * period { ts + period } else { *next + period };
-            return true;
+        if !self.is_due(ts, period) {
+            return false;
         }
-        false
+        let next = self.next_out.get_or_insert(ts);
+        *next = if ts - *next > period || ts < *next - 2.0 * period { ts + period } else { *next + period };
+        true
     }
 }
