@@ -50,7 +50,8 @@ static-copy:
 # (eval_recorded runs the static binary itself). The binary is built by the parity test's
 # build: cargo unifies the dev-dependencies' features into a test build, so a separate `cargo build`
 # would compile most dependencies twice. Same sources, features and flags as `make static`.
-STATIC_TESTS := --workspace --lib --test backend_parity --test infer_onnx --test pipeline_e2e --test eval_recorded
+STATIC_TESTS := --workspace --lib --test backend_parity --test infer_onnx --test pipeline_e2e --test eval_recorded \
+	--test pipeline_alloc
 static-check: setup
 	$(STATIC_CARGO) test $(STATIC_FLAGS) $(STATIC_TESTS) --no-run
 	@$(MAKE) --no-print-directory static-copy

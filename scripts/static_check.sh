@@ -34,7 +34,7 @@ cd "$dir"
 run() { env -i PATH=/usr/bin:/bin HOME="$dir" "$@"; }
 
 version=$(run ./fme --version)
-[[ $version == *"backend tract, models embedded"* ]] || fail "fme --version says \"$version\", not the tract backend with embedded models"
+[[ $version == *"backend tract, default models fp32, embedded"* ]] || fail "fme --version says \"$version\", not the tract backend with embedded fp32 models"
 
 # localhost:0 goes through getaddrinfo (and /etc/hosts); port 0 takes any free port.
 if ! run ./fme run --config config/fme.toml --source recording --max-frames 60 --fast \

@@ -211,7 +211,10 @@ fn version_names_the_backend() {
     assert!(out.status.success(), "{text}");
     assert_eq!(text.trim(), format!("fme {}", fme::infer::backend::VERSION));
     #[cfg(all(feature = "ort", not(feature = "embed-models")))]
-    assert_eq!(text.trim(), format!("fme {} (backend onnxruntime)", env!("CARGO_PKG_VERSION")));
+    assert_eq!(
+        text.trim(),
+        format!("fme {} (backend onnxruntime, default models int8-qdq)", env!("CARGO_PKG_VERSION"))
+    );
 }
 
 /// A free local port (bound, then released) for a daemon the test talks to.

@@ -13,8 +13,8 @@
 use std::borrow::Cow;
 use std::path::Path;
 
-use super::InferError;
 use super::runtime::SessionOptions;
+use super::{InferError, ModelForm};
 
 #[cfg(not(any(feature = "ort", feature = "tract")))]
 compile_error!("fme needs an inference backend: enable the cargo feature `ort` (the default) or `tract`");
@@ -75,22 +75,25 @@ impl std::fmt::Display for Backend {
 }
 
 macro_rules! build_line {
-    ($backend:literal, $models:literal) => {
-        /// The backend and model source of this build, e.g. `backend tract, models embedded`
-        /// (`fme --version`, the console `version`).
-        pub const BUILD: &str = concat!("backend ", $backend, $models);
+    ($backend:literal, $forms:literal, $models:literal) => {
+        /// The backend, the numeric form of its default models and whether they are inside the
+        /// executable, e.g. `backend tract, default models fp32, embedded` (`fme --version`, the
+        /// console `version`, the start-up line).
+        pub const BUILD: &str = concat!("backend ", $backend, ", default models ", $forms, $models);
         /// `fme --version`: the package version and [`BUILD`].
-        pub const VERSION: &str = concat!(env!("CARGO_PKG_VERSION"), " (backend ", $backend, $models, ")");
+        pub const VERSION: &str =
+            concat!(env!("CARGO_PKG_VERSION"), " (backend ", $backend, ", default models ", $forms, $models, ")");
     };
 }
+// The forms of `config::DEFAULT_DETECTOR_MODEL` and `DEFAULT_DEPTH_MODEL` (a test checks them).
 #[cfg(all(feature = "ort", feature = "embed-models"))]
-build_line!("onnxruntime", ", models embedded");
+build_line!("onnxruntime", "int8-qdq", ", embedded");
 #[cfg(all(feature = "ort", not(feature = "embed-models")))]
-build_line!("onnxruntime", "");
+build_line!("onnxruntime", "int8-qdq", "");
 #[cfg(all(not(feature = "ort"), feature = "embed-models"))]
-build_line!("tract", ", models embedded");
+build_line!("tract", "fp32", ", embedded");
 #[cfg(all(not(feature = "ort"), not(feature = "embed-models")))]
-build_line!("tract", "");
+build_line!("tract", "fp32", "");
 
 /// A float32 tensor outlet of a model: its name and shape (`-1` for a dynamic dimension), or why
 /// it is not a float32 tensor.
@@ -137,7 +140,11 @@ pub struct Model {
     inner: Inner,
     inputs: Vec<Outlet>,
     outputs: Vec<Outlet>,
+    form: ModelForm,
 }
+
+/// What a backend's `open` gives: the runtime's handle and the model's inputs and outputs.
+type Opened = (Inner, Vec<Outlet>, Vec<Outlet>);
 
 enum Inner {
     #[cfg(feature = "ort")]
@@ -152,6 +159,7 @@ impl std::fmt::Debug for Model {
             .field("backend", &self.backend())
             .field("inputs", &self.inputs)
             .field("outputs", &self.outputs)
+            .field("form", &self.form)
             .finish()
     }
 }
@@ -161,15 +169,18 @@ impl Model {
     /// model the runtime rejects is an [`InferError::ModelFile`] naming the file.
     pub fn open(path: &Path, opts: SessionOptions, backend: Backend) -> Result<Self, InferError> {
         let bytes = model_bytes(path)?;
-        match backend {
+        let (inner, inputs, outputs) = match backend {
             #[cfg(feature = "ort")]
-            Backend::Ort => ort_backend::open(path, &bytes, opts),
+            Backend::Ort => ort_backend::open(path, &bytes, opts)?,
             #[cfg(feature = "tract")]
-            Backend::Tract => {
-                let _ = opts;
-                tract::open(path, &bytes)
-            }
-        }
+            Backend::Tract => tract::open(path, &bytes, opts)?,
+        };
+        Ok(Model { inner, inputs, outputs, form: ModelForm::of_onnx(&bytes) })
+    }
+
+    /// The file's numeric form (float32, int8 QDQ or QOperator).
+    pub fn form(&self) -> ModelForm {
+        self.form
     }
 
     /// The backend running this model.
@@ -255,11 +266,11 @@ mod ort_backend {
     use ort::session::builder::GraphOptimizationLevel;
     use ort::value::ValueType;
 
-    use super::{Inner, Model, Outlet};
+    use super::{Inner, Opened, Outlet};
     use crate::infer::InferError;
     use crate::infer::runtime::{SessionOptions, environment};
 
-    pub(super) fn open(path: &Path, bytes: &[u8], opts: SessionOptions) -> Result<Model, InferError> {
+    pub(super) fn open(path: &Path, bytes: &[u8], opts: SessionOptions) -> Result<Opened, InferError> {
         let model_err = |reason: String| InferError::ModelFile { path: path.to_path_buf(), reason };
         let env = environment()?;
         let mut builder = Session::builder(env)
@@ -275,7 +286,7 @@ mod ort_backend {
         let outlet = |name: &str, ty: &ValueType| Outlet { name: name.to_string(), shape: float_shape(ty) };
         let inputs = session.inputs().iter().map(|o| outlet(o.name(), o.dtype())).collect();
         let outputs = session.outputs().iter().map(|o| outlet(o.name(), o.dtype())).collect();
-        Ok(Model { inner: Inner::Ort(session), inputs, outputs })
+        Ok((Inner::Ort(session), inputs, outputs))
     }
 
     fn float_shape(ty: &ValueType) -> Result<Vec<i64>, String> {
@@ -293,21 +304,54 @@ mod tract {
     use std::path::Path;
 
     use tract_onnx::prelude::*;
+    use tract_onnx::tract_core::plan::SimpleState;
     use tract_onnx::tract_hir::infer::Factoid;
 
-    use super::{Inner, Model, Outlet};
+    use tract_linalg::multithread::{Executor, multithread_tract_scope};
+
+    use super::{Inner, Opened, Outlet};
     use crate::infer::InferError;
+    use crate::infer::runtime::SessionOptions;
 
     type Plan = Arc<TypedRunnableModel>;
 
-    /// The parsed graph, and its plan for one input shape once [`Graph::plan`] ran.
+    /// The parsed graph, its plan for one input shape once [`Graph::plan`] ran, and the threads its
+    /// matrix products run on.
     pub(super) struct Graph {
         model: Option<InferenceModel>,
-        plan: Option<(TVec<usize>, Plan)>,
+        plan: Option<Planned>,
+        executor: Executor,
     }
 
-    pub(super) fn open(path: &Path, bytes: &[u8]) -> Result<Model, InferError> {
+    /// A plan for one input shape and the run state kept across runs (tract builds the per-node
+    /// states again for every run of a bare plan).
+    struct Planned {
+        shape: TVec<usize>,
+        plan: Plan,
+        state: TypedSimpleState,
+    }
+
+    /// The threads of `opts` as a tract executor: one thread runs on the caller's; more get a pool
+    /// of their own per model, as ONNX Runtime's sessions do (0: one per core).
+    fn executor(opts: SessionOptions) -> Result<Executor, String> {
+        let n = match opts.intra_threads {
+            0 => std::thread::available_parallelism().map_or(1, usize::from),
+            n => n,
+        };
+        if n <= 1 {
+            return Ok(Executor::SingleThread);
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .thread_name(|i| format!("fme-tract-{i}"))
+            .build()
+            .map(|pool| Executor::MultiThread(Arc::new(pool)))
+            .map_err(|e| format!("cannot start {n} inference threads: {e}"))
+    }
+
+    pub(super) fn open(path: &Path, bytes: &[u8], opts: SessionOptions) -> Result<Opened, InferError> {
         let model_err = |reason: String| InferError::ModelFile { path: path.to_path_buf(), reason };
+        let executor = executor(opts).map_err(model_err)?;
         let model = tract_onnx::onnx()
             .model_for_read(&mut &bytes[..])
             .map_err(|e| model_err(format!("not a loadable ONNX model: {e:#}")))?;
@@ -318,8 +362,8 @@ mod tract {
         };
         let inputs = model.inputs.iter().map(outlet).collect::<Result<Vec<_>, _>>()?;
         let outputs = model.outputs.iter().map(outlet).collect::<Result<Vec<_>, _>>()?;
-        let graph = Graph { model: Some(model), plan: None };
-        Ok(Model { inner: Inner::Tract(graph), inputs, outputs })
+        let graph = Graph { model: Some(model), plan: None, executor };
+        Ok((Inner::Tract(graph), inputs, outputs))
     }
 
     fn float_shape(fact: &InferenceFact) -> Result<Vec<i64>, String> {
@@ -344,11 +388,11 @@ mod tract {
     impl Graph {
         /// Plans and optimises the graph for `shape`; once planned, another shape is an error.
         pub(super) fn plan(&mut self, shape: [usize; 4]) -> Result<(), String> {
-            if let Some((planned, _)) = &self.plan {
-                return if planned[..] == shape[..] {
+            if let Some(planned) = &self.plan {
+                return if planned.shape[..] == shape[..] {
                     Ok(())
                 } else {
-                    Err(format!("planned for input {planned:?}, asked for {shape:?}"))
+                    Err(format!("planned for input {:?}, asked for {shape:?}", planned.shape))
                 };
             }
             let Some(model) = self.model.take() else {
@@ -359,16 +403,17 @@ mod tract {
                 .and_then(|m| m.into_optimized())
                 .and_then(|m| m.into_runnable())
                 .map_err(|e| format!("tract cannot run this graph: {e:#}"))?;
-            self.plan = Some((shape.into(), plan));
+            let state = SimpleState::new(&plan).map_err(|e| format!("tract cannot run this graph: {e:#}"))?;
+            self.plan = Some(Planned { shape: shape.into(), plan, state });
             Ok(())
         }
 
         /// The planned graph's output shapes.
         pub(super) fn outputs(&self) -> Result<Vec<Result<Vec<i64>, String>>, String> {
-            let Some((_, plan)) = &self.plan else {
+            let Some(planned) = &self.plan else {
                 return Err("the graph is not planned".into());
             };
-            let model = plan.model();
+            let model = planned.plan.model();
             (0..model.outputs.len())
                 .map(|ix| model.output_fact(ix).map(typed_shape).map_err(|e| format!("{e:#}")))
                 .collect()
@@ -377,11 +422,13 @@ mod tract {
         /// Runs the planned graph on `input`; returns the first output.
         pub(super) fn run(&mut self, shape: [usize; 4], input: &[f32]) -> Result<TValue, String> {
             self.plan(shape)?;
-            let Some((_, plan)) = &self.plan else {
+            let Some(planned) = &mut self.plan else {
                 return Err("no plan".into());
             };
             let tensor = Tensor::from_shape(&shape, input).map_err(|e| format!("input tensor: {e:#}"))?;
-            let mut out = plan.run(tvec!(tensor.into())).map_err(|e| format!("{e:#}"))?;
+            let state = &mut planned.state;
+            let mut out = multithread_tract_scope(self.executor.clone(), || state.run(tvec!(tensor.into())))
+                .map_err(|e| format!("{e:#}"))?;
             if out.is_empty() {
                 return Err("the graph has no output".into());
             }
@@ -398,7 +445,12 @@ mod tests {
     fn version_names_the_backend_and_the_models() {
         assert!(VERSION.starts_with(env!("CARGO_PKG_VERSION")), "{VERSION}");
         assert!(VERSION.contains(BUILD) && BUILD.contains(Backend::DEFAULT.name()), "{VERSION}");
-        assert_eq!(BUILD.contains("models embedded"), !super::super::embedded::MODELS.is_empty(), "{BUILD}");
+        assert_eq!(BUILD.ends_with(", embedded"), !super::super::embedded::MODELS.is_empty(), "{BUILD}");
+        for model in [crate::infer::config::DEFAULT_DETECTOR_MODEL, crate::infer::config::DEFAULT_DEPTH_MODEL] {
+            let bytes = std::fs::read(Path::new(crate::REPO_DIR).join(model)).expect("bundled model");
+            let form = ModelForm::of_onnx(&bytes);
+            assert!(BUILD.contains(&format!("default models {form}")), "{BUILD} but {model} is {form}");
+        }
         assert_eq!(Backend::ALL.first(), Some(&Backend::DEFAULT));
     }
 

@@ -30,7 +30,7 @@ pub struct DetectorConfig {
     pub confidence: f64,
     /// Non-maximum-suppression IoU threshold, 0..1 (Ultralytics `iou`).
     pub nms_iou: f64,
-    /// ONNX Runtime intra-op threads.
+    /// Inference threads (ONNX Runtime's intra-op threads; tract's matrix products).
     pub threads: usize,
     /// Let ONNX Runtime's idle worker threads spin between operators (with `threads >= 2`): lower
     /// latency, more CPU; off leaves the cores to the tracker and the other network.
@@ -120,7 +120,7 @@ pub struct DepthConfig {
     pub model: PathBuf,
     /// Depth-network runs per second of frame time, Hz. 0 = every frame.
     pub rate_hz: f64,
-    /// ONNX Runtime intra-op threads.
+    /// Inference threads (ONNX Runtime's intra-op threads; tract's matrix products).
     pub threads: usize,
     /// Let ONNX Runtime's idle worker threads spin between operators (with `threads >= 2`).
     pub spin: bool,

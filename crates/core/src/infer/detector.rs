@@ -85,6 +85,10 @@ impl Detector {
     pub fn path(&self) -> &Path {
         &self.path
     }
+    /// The model file's numeric form.
+    pub fn form(&self) -> super::ModelForm {
+        self.model.form()
+    }
     /// The backend running the network.
     pub fn backend(&self) -> Backend {
         self.model.backend()

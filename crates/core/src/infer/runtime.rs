@@ -131,8 +131,8 @@ pub fn resolve_model(path: &Path) -> PathBuf {
 /// Session options shared by the detector and the depth network.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SessionOptions {
-    /// Intra-op threads (includes the calling thread). 0 lets ONNX Runtime choose. tract runs on
-    /// one thread.
+    /// Intra-op threads (ONNX Runtime's include the calling thread; tract's matrix products get a
+    /// pool of this many). 0: ONNX Runtime chooses, tract takes one per core.
     pub intra_threads: usize,
     /// Let idle worker threads spin (lower latency, but burns CPU the tracker could use).
     pub spin: bool,

@@ -16,7 +16,10 @@
 use super::PipelineConfig;
 use super::rate::RateMeter;
 use super::substitute::Substitute;
-use super::{ActivitySample, Calibration, Frame, FrameOutcome, Pipeline, PipelineError, QualityFlags, StageHealth};
+use super::{
+    ActivitySample, Calibration, Frame, FrameOutcome, Network, Networks, Pipeline, PipelineError, QualityFlags,
+    StageHealth,
+};
 use crate::familiarity::FamiliarityMonitor;
 use crate::geometry::{Camera, PixelBox};
 use crate::infer::{self, DepthNet, Detector, FramePlan, InferSchedule, RgbFrame};
@@ -421,6 +424,14 @@ impl Pipeline for FishPipeline {
 
     fn health(&self) -> StageHealth {
         self.health
+    }
+
+    fn networks(&self) -> Networks {
+        let det =
+            self.detector.as_ref().map(|d| Network { path: d.path().into(), form: d.form(), backend: d.backend() });
+        let depth =
+            self.depth.as_ref().map(|d| Network { path: d.path().into(), form: d.form(), backend: d.backend() });
+        Networks { detector: det, depth }
     }
 
     fn reference_residuals(&self, out: &mut Vec<(crate::geometry::Pixel, f64)>) {

@@ -98,6 +98,10 @@ pub trait Pipeline: Send {
     fn process(&mut self, frame: &Frame) -> Result<FrameOutcome<'_>, PipelineError>;
     /// Current stage health (also after a frame that failed).
     fn health(&self) -> StageHealth;
+    /// The networks this pipeline runs (the start-up line, the build-info metric). The default: none.
+    fn networks(&self) -> Networks {
+        Networks::default()
+    }
     /// Each reference object in view: its pixel and the depth fit's residual there (fitted minus
     /// known depth, m; NaN without a fit or a depth reading), into `out`. A depth reading each, so
     /// only snapshots ask. The default: none.
@@ -108,6 +112,44 @@ pub trait Pipeline: Send {
     /// `width` x `height` image, row-major into `out`; false when there is no metric depth yet.
     fn depth_grid(&self, _size: (u32, u32), _grid: (u32, u32), _out: &mut Vec<f32>) -> bool {
         false
+    }
+}
+
+/// One network a pipeline runs: its file, numeric form and backend.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Network {
+    /// The model file as resolved (an embedded copy keeps its default path).
+    pub path: std::path::PathBuf,
+    /// float32, int8 QDQ or int8 QOperator.
+    pub form: crate::infer::ModelForm,
+    /// The runtime running it.
+    pub backend: crate::infer::Backend,
+}
+
+/// The networks of a pipeline; `None` where a stage runs none (replaced in `fme eval`).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Networks {
+    /// The fish detector.
+    pub detector: Option<Network>,
+    /// The relative-depth network.
+    pub depth: Option<Network>,
+}
+
+impl std::fmt::Display for Networks {
+    /// `detector models/fish_det_int8.onnx (int8-qdq, onnxruntime), depth ...`, or `none`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut first = true;
+        for (what, n) in [("detector", &self.detector), ("depth", &self.depth)] {
+            if let Some(n) = n {
+                let sep = if first { "" } else { ", " };
+                write!(f, "{sep}{what} {} ({}, {})", n.path.display(), n.form, n.backend)?;
+                first = false;
+            }
+        }
+        if first {
+            f.write_str("none")?;
+        }
+        Ok(())
     }
 }
 
@@ -130,4 +172,27 @@ pub enum PipelineError {
         /// What went wrong.
         message: String,
     },
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::infer::{Backend, ModelForm};
+
+    #[test]
+    fn networks_read_as_the_start_up_line_names_them() {
+        assert_eq!(Networks::default().to_string(), "none");
+        let det = Network { path: "models/d.onnx".into(), form: ModelForm::Int8Qdq, backend: Backend::DEFAULT };
+        let depth = Network { path: "models/z.onnx".into(), form: ModelForm::Fp32, backend: Backend::DEFAULT };
+        let b = Backend::DEFAULT.name();
+        let both = Networks { detector: Some(det), depth: Some(depth.clone()) };
+        assert_eq!(
+            both.to_string(),
+            format!("detector models/d.onnx (int8-qdq, {b}), depth models/z.onnx (fp32, {b})")
+        );
+        assert_eq!(
+            Networks { detector: None, depth: Some(depth) }.to_string(),
+            format!("depth models/z.onnx (fp32, {b})")
+        );
+    }
 }

@@ -181,7 +181,11 @@ impl Daemon {
         };
         let bank = Arc::new(RegisterBank::new());
         let shared = Arc::new(Shared::new(config_text, cfg.console.log_lines));
-        shared.with_health(|h| h.source = source.describe());
+        let networks = pipeline.networks();
+        shared.with_health(|h| {
+            h.source = source.describe();
+            h.networks = networks.clone();
+        });
         shared.set_word_order(cfg.output.modbus.word_order);
         shared.log(
             Level::INFO,
@@ -192,6 +196,7 @@ impl Daemon {
                 source.describe()
             ),
         );
+        shared.log(Level::INFO, format!("networks: {networks}"));
         if let Some(note) = scale_note(&cfg) {
             shared.log(Level::WARN, note);
         }

@@ -82,6 +82,8 @@ pub struct Health {
     pub started: Instant,
     /// Source description.
     pub source: String,
+    /// The networks the pipeline runs (file, numeric form, backend), set at start.
+    pub networks: fme_core::pipeline::Networks,
     /// The camera delivers frames.
     pub camera_ok: bool,
     /// Camera frame rate over the last second, frames/s.
@@ -264,6 +266,7 @@ impl Health {
         Self {
             started: Instant::now(),
             source: String::new(),
+            networks: fme_core::pipeline::Networks::default(),
             camera_ok: false,
             camera_fps: 0.0,
             frames_captured: 0,

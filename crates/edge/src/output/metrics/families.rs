@@ -25,10 +25,19 @@ fn build_and_activity(s: &Scrape, e: &mut Exposition) {
     let h = &s.health;
     let (maj, min) = registers::version();
     let map = format!("{maj}.{min}");
+    let nets = &h.networks;
+    let form = |n: &Option<fme_core::pipeline::Network>| n.as_ref().map_or("none", |n| n.form.name());
+    let backend = nets.detector.as_ref().or(nets.depth.as_ref()).map_or("none", |n| n.backend.name());
     e.info(
         "fme_build_info",
-        "fme version and register-map version (value 1).",
-        &[("version", env!("CARGO_PKG_VERSION")), ("register_map", &map)],
+        "fme version, register-map version, inference backend and the networks' numeric forms (value 1).",
+        &[
+            ("version", env!("CARGO_PKG_VERSION")),
+            ("register_map", &map),
+            ("backend", backend),
+            ("detector", form(&nets.detector)),
+            ("depth", form(&nets.depth)),
+        ],
     );
     e.gauge(
         "fme_uptime_seconds",

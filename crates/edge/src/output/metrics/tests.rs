@@ -21,6 +21,11 @@ fn snapshot() -> Scrape {
             scale: fme_core::pipeline::ScaleSource::References,
         });
         h.last_sample_at = Some(Instant::now());
+        h.networks.detector = Some(fme_core::pipeline::Network {
+            path: "models/fish_det_int8.onnx".into(),
+            form: fme_core::infer::ModelForm::Int8Qdq,
+            backend: fme_core::infer::Backend::DEFAULT,
+        });
         for ms in [0.5, 3.0, 7.0, 40.0, 2000.0] {
             h.latency.record(ms);
         }
@@ -140,7 +145,14 @@ fn every_family_once_with_valid_names_and_a_strict_parser_accepts_it() {
     assert_eq!(value(&t, "fme_feeding_recommended"), "1");
     assert_eq!(value(&t, "fme_activity_age_seconds").parse::<f64>().map(|a| a < 5.0), Ok(true));
     assert_eq!(
-        value(&t, &format!("fme_build_info{{version=\"{}\",register_map=\"0.1\"}}", env!("CARGO_PKG_VERSION"))),
+        value(
+            &t,
+            &format!(
+                "fme_build_info{{version=\"{}\",register_map=\"0.1\",backend=\"{}\",detector=\"int8-qdq\",depth=\"none\"}}",
+                env!("CARGO_PKG_VERSION"),
+                fme_core::infer::Backend::DEFAULT.name()
+            )
+        ),
         "1"
     );
     // Latencies 0.5, 3, 7, 40, 2000 ms.

@@ -92,12 +92,18 @@ pub fn event_json(box_id: &str, u: &Update, kind: EventKind, out: &mut String) {
     out.push('}');
 }
 
-/// The retained `config` JSON: box id, fme version and the effective configuration (it holds no
-/// secret: the password is only named by its file, `output.mqtt.password_file`).
+/// The retained `config` JSON: box id, fme version, the build (backend, default model form), the
+/// configured networks' numeric forms and the effective configuration (it holds no secret: the
+/// password is only named by its file, `output.mqtt.password_file`).
 pub fn config_json(box_id: &str, cfg: &Config) -> String {
     let mut out = String::from("{");
     push_str(&mut out, "box_id", box_id);
     push_str(&mut out, "version", env!("CARGO_PKG_VERSION"));
+    push_str(&mut out, "build", fme_core::infer::backend::BUILD);
+    for (key, model) in [("detector_form", &cfg.detector.model), ("depth_form", &cfg.depth.model)] {
+        let form = fme_core::infer::ModelForm::of_file(model);
+        push_str(&mut out, key, form.as_ref().map_or("unreadable", |f| f.name()));
+    }
     match serde_json::to_string(cfg) {
         Ok(c) => {
             let _ = write!(out, "\"config\":{c}}}");

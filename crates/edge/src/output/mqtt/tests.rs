@@ -98,6 +98,20 @@ fn config_json_has_no_password_only_its_file() {
     let v: serde_json::Value = serde_json::from_str(&j).expect(&j);
     assert_eq!(v["config"]["output"]["mqtt"]["password_file"], "/etc/fme/mqtt.pass");
     assert!(v["config"]["output"]["mqtt"].get("password").is_none());
+    assert_eq!(v["build"], fme_core::infer::backend::BUILD);
+}
+
+#[test]
+fn config_json_names_each_configured_networks_form() {
+    let models = std::path::Path::new(fme_core::REPO_DIR).join("models");
+    let mut c = Config::default();
+    c.detector.model = models.join("fish_det_int8.onnx");
+    c.depth.model = models.join("fish_depth_fp32.onnx");
+    let v: serde_json::Value = serde_json::from_str(&config_json("b", &c)).expect("json");
+    assert_eq!((v["detector_form"].as_str(), v["depth_form"].as_str()), (Some("int8-qdq"), Some("fp32")));
+    c.detector.model = "/no/such/model.onnx".into();
+    let v: serde_json::Value = serde_json::from_str(&config_json("b", &c)).expect("json");
+    assert_eq!(v["detector_form"], "unreadable");
 }
 
 #[test]
