@@ -151,6 +151,7 @@ impl Config {
         stages::check(self)?;
         self.output.validate()?;
         self.feeding.validate()?;
+        self.web.validate()?;
         self.record.validate()
     }
 }
