@@ -184,6 +184,17 @@ impl Config {
                 ),
             ));
         }
+        let w = &self.web;
+        if allow::open_to_all(&w.listen, &w.allow) {
+            out.push((
+                "web.allow".to_string(),
+                format!(
+                    "empty while web.listen is {:?}: every host on the network may open the web page; list who may, \
+                     e.g. [\"192.168.1.0/24\"]",
+                    w.listen
+                ),
+            ));
+        }
         out
     }
 }

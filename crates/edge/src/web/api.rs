@@ -61,6 +61,7 @@ pub fn status_json(s: &WebState) -> Value {
 /// The health part of `/api/status`: rates, drops, latency, outputs, disk, version.
 fn health_json(s: &WebState, u: &crate::output::Update, h: &crate::status::Health) -> Value {
     let q = |p: f64| h.latency.quantile_ms(p);
+    let c = s.bank.counters();
     json!({
         "camera_fps": u.camera_fps,
         "detector_hz": u.detector_hz,
@@ -76,6 +77,9 @@ fn health_json(s: &WebState, u: &crate::output::Update, h: &crate::status::Healt
         "latency_p99_ms": q(0.99),
         "source": h.source,
         "modbus": s.shared.modbus.get().map_or("off", String::as_str),
+        "modbus_clients": c.tcp_open,
+        "modbus_requests": c.requests,
+        "modbus_polled_last_10s": s.bank.served_within(Duration::from_secs(10)),
         "mqtt": h.mqtt.link.name(),
         "history": s.shared.history.describe(),
         "metrics": s.shared.metrics.describe(),

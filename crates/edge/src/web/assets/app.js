@@ -79,7 +79,9 @@ function el(name, attrs, text) {
 
 // One chart: series [{values, colour}] over times `ts` (ms), horizontal lines [{y, colour}].
 function chart(box, ts, series, lines, from, to, digits) {
-  const W = 900, H = 260, L = 52, R = 10, T = 10, B = 28;
+  // Drawn at the box's own width, so the labels keep their size on a phone.
+  const W = Math.max(300, Math.round(box.clientWidth || 900)), H = W < 600 ? 200 : 260;
+  const L = 52, R = 12, T = 10, B = 28, ticks = W < 600 ? 2 : 4;
   const svg = el("svg", { viewBox: `0 0 ${W} ${H}`, role: "img" });
   let max = 0;
   for (const s of series) for (const v of s.values) if (v !== null && isFinite(v)) max = Math.max(max, v);
@@ -92,11 +94,11 @@ function chart(box, ts, series, lines, from, to, digits) {
     svg.appendChild(el("line", { x1: L, x2: W - R, y1: y(v), y2: y(v), stroke: "#2a3947" }));
     svg.appendChild(el("text", { x: L - 6, y: y(v) + 4, "text-anchor": "end" }, v.toFixed(digits)));
   }
-  for (let i = 0; i <= 4; i++) {
-    const t = from + (to - from) * i / 4;
+  for (let i = 0; i <= ticks; i++) {
+    const t = from + (to - from) * i / ticks;
     const d = new Date(t);
     const label = to - from > 86400000 * 1.5 ? d.toLocaleDateString([], { month: "short", day: "numeric" }) + " " + d.toLocaleTimeString([], { hour: "2-digit", minute: "2-digit" }) : d.toLocaleTimeString([], { hour: "2-digit", minute: "2-digit" });
-    svg.appendChild(el("text", { x: x(t), y: H - 8, "text-anchor": i === 0 ? "start" : (i === 4 ? "end" : "middle") }, label));
+    svg.appendChild(el("text", { x: x(t), y: H - 8, "text-anchor": i === 0 ? "start" : (i === ticks ? "end" : "middle") }, label));
   }
   for (const l of lines) {
     if (l.y > 0) svg.appendChild(el("line", { x1: L, x2: W - R, y1: y(l.y), y2: y(l.y), stroke: l.colour, "stroke-dasharray": "6 4" }));
@@ -155,6 +157,7 @@ function health() {
         ["Status", s.status.replaceAll("_", " ")],
         ["Fault", s.fault],
         ["Modbus", h.modbus],
+        ["Modbus clients, requests", `${h.modbus_clients} open, ${h.modbus_requests} answered, ${h.modbus_polled_last_10s ? "polled in the last 10 s" : "no poll in the last 10 s"}`],
         ["MQTT", h.mqtt],
         ["Metrics", h.metrics],
         ["History", h.history],
