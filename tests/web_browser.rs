@@ -1,8 +1,9 @@
 //! The web page in a real browser: headless Chromium (Debian's `chromium` and `chromium-driver`,
 //! installed by `make setup`) driven over WebDriver against `fme run` on the bundled recording.
 //! The live page shows the activity the Modbus register holds (within one update), an action
-//! without the token is refused, and screenshots of each page at phone (390 px) and desktop
-//! (1280 px) width are written under `target/web-screenshots/` (docs/web.md has what each must show).
+//! without the token is refused, the history page draws the run's rows, and screenshots of each
+//! page at phone (390 px) and desktop (1280 px) width are written under `target/web-screenshots/`
+//! (docs/web.md has what each must show).
 
 use fantoccini::{Client, ClientBuilder};
 use serde_json::{Value, json};
@@ -172,6 +173,19 @@ async fn the_live_page_shows_the_registers_and_refuses_an_action_without_the_tok
     // An action without the token, from the page itself: refused.
     let js = "return fetch('/api/snapshot', {method: 'POST'}).then(r => r.status);";
     assert_eq!(c.execute(js, vec![]).await.expect("fetch"), json!(401));
+
+    // The history page draws this run's rows (a line of at least two points).
+    c.goto(&format!("http://127.0.0.1:{web}/history")).await.expect("open the history page");
+    let js = "const p = document.querySelector('#activity-chart path'); return p ? p.getAttribute('d') : '';";
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let d = c.execute(js, vec![]).await.expect("read the chart");
+        if d.as_str().is_some_and(|d| d.contains('L')) {
+            break;
+        }
+        assert!(Instant::now() < deadline, "no activity line on the history page: {d}");
+        tokio::time::sleep(Duration::from_millis(300)).await;
+    }
 
     screenshots(&c, web).await;
     c.close().await.expect("close the browser");
