@@ -93,8 +93,11 @@ bench-core:
 # live one-line view; stops after DEMO_FRAMES frames (real time: 15 s). Read it with mbpoll (docs/plc-integration.md).
 DEMO_SEQ ?= tests/data/swarm20
 DEMO_FRAMES ?= 450
+# The web page (docs/web.md) on this box only while the demo runs.
+DEMO_WEB ?= 127.0.0.1:8080
 demo-run: build
-	$(BIN) run --config config/fme.toml --source $(DEMO_SEQ) --modbus-listen 127.0.0.1:5020 --live --max-frames $(DEMO_FRAMES)
+	@echo "demo: the web page is at http://$(DEMO_WEB)/ while fme runs (docs/web.md)"
+	$(BIN) run --config config/fme.toml --source $(DEMO_SEQ) --modbus-listen 127.0.0.1:5020 --set 'web.listen="$(DEMO_WEB)"' --live --max-frames $(DEMO_FRAMES)
 
 # The whole daemon with the real pipeline on the bundled recording: real-time replay (drops, latency,
 # CPU, RSS) and a long as-fast-as-possible run (memory flatness).

@@ -21,6 +21,9 @@ command -v unzip >/dev/null 2>&1 || need_apt+=(unzip)
 command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ] || need_apt+=(mosquitto)
 # socat: the documented way to reach the console without a serial port (tests/daemon/console_socat.rs).
 command -v socat >/dev/null 2>&1 || need_apt+=(socat)
+# The web page's browser test (tests/web_browser.rs) drives headless Chromium through chromedriver.
+command -v chromium >/dev/null 2>&1 || need_apt+=(chromium)
+command -v chromedriver >/dev/null 2>&1 || need_apt+=(chromium-driver)
 if [ ${#need_apt[@]} -gt 0 ]; then
   echo "setup: installing ${need_apt[*]} with apt" >&2
   $SUDO apt-get update -q >/dev/null

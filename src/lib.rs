@@ -17,6 +17,7 @@ pub use fme_core::{
 };
 pub use fme_edge::{
     backoff, calibration, capture, civil, config, console, draw, history, output, record, sequence, service, status,
+    web,
 };
 pub use fme_lab::{calib, eval, mot, rng, synth, tune};
 

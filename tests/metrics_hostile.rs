@@ -52,13 +52,13 @@ async fn slowloris(from: &'static str, addr: SocketAddr, stop: Arc<AtomicBool>) 
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_steady_scraper_is_answered_through_slowloris_from_four_addresses() {
-    let cfg = MetricsConfig { listen: "127.0.0.1:0".into(), ..MetricsConfig::default() };
+    let metrics = MetricsConfig { listen: "127.0.0.1:0".into(), ..MetricsConfig::default() };
+    let mut cfg = fme::config::Config::default();
+    cfg.output.metrics = metrics;
     let shared = Arc::new(Shared::new(String::new(), 64));
     let bank = Arc::new(RegisterBank::new());
-    let server = fme::output::metrics_http::spawn(&cfg, Duration::from_secs(5), &shared, &bank)
-        .await
-        .expect("the endpoint serves");
-    let addr = server.addr;
+    let server = fme::web::spawn(&cfg, Duration::from_secs(5), &shared, &bank).await.expect("the endpoint serves");
+    let addr = server.metrics_addr.expect("the metrics listener");
     // A scraper that has been scraping steadily.
     for _ in 0..2 {
         assert!(scrape(addr).await, "before the attack");

@@ -35,3 +35,4 @@ pub mod record;
 pub mod sequence;
 pub mod service;
 pub mod status;
+pub mod web;

@@ -30,6 +30,8 @@ pub fn check(cfg: &Config) -> Result<(), (String, String)> {
         std::fs::read(&q.password_file)
             .map_err(|e| keyed("output.mqtt.password_file")(format!("{}: {e}", q.password_file.display())))?;
     }
+    // Read, never shown: only the file is named.
+    cfg.web.token().map_err(keyed("web.token_file"))?;
     if !q.ca_file.as_os_str().is_empty() {
         crate::output::mqtt::read_pem_certs(&q.ca_file).map_err(keyed("output.mqtt.ca_file"))?;
     }

@@ -151,6 +151,7 @@ impl Config {
         stages::check(self)?;
         self.output.validate()?;
         self.feeding.validate()?;
+        self.web.validate()?;
         self.record.validate()
     }
 }
@@ -180,6 +181,17 @@ impl Config {
                     "empty while output.metrics.listen is {:?}: every host on the network may scrape; list the \
                      Prometheus server's address, e.g. [\"192.168.1.30\"]",
                     mx.listen
+                ),
+            ));
+        }
+        let w = &self.web;
+        if allow::open_to_all(&w.listen, &w.allow) {
+            out.push((
+                "web.allow".to_string(),
+                format!(
+                    "empty while web.listen is {:?}: every host on the network may open the web page; list who may, \
+                     e.g. [\"192.168.1.0/24\"]",
+                    w.listen
                 ),
             ));
         }

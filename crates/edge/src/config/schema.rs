@@ -18,6 +18,7 @@ pub use crate::output::config::{
 };
 pub use crate::record::config::RecordConfig;
 pub use crate::service::config::ServiceConfig;
+pub use crate::web::config::WebConfig;
 pub use fme_core::familiarity::FamiliarityConfig;
 pub use fme_core::infer::{DepthConfig, DetectorConfig};
 pub use fme_core::motion::MotionConfig;
@@ -56,6 +57,8 @@ pub struct Config {
     pub record: RecordConfig,
     /// `[history]`: a daily CSV row per output update (`docs/history.md`).
     pub history: HistoryConfig,
+    /// `[web]`: the web pages and JSON API (`docs/web.md`).
+    pub web: WebConfig,
 }
 
 impl Config {

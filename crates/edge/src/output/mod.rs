@@ -1,6 +1,6 @@
 //! Outputs to the farm: register map, Modbus TCP/RTU server and client, serial line, feeding rule,
 //! MQTT telemetry ([`mqtt`], docs/mqtt.md) and the Prometheus endpoint ([`metrics`], served by
-//! [`metrics_http`]). Each reads the one published [`Update`], made once per update by the
+//! [`crate::web`]). Each reads the one published [`Update`], made once per update by the
 //! publisher; none decodes another's encoding.
 //!
 //! The register map ([`registers`]) and the feeding rule ([`feeding`]) are pure and tested without
@@ -13,7 +13,6 @@ pub mod feeding;
 pub mod listen_hint;
 pub mod log_throttle;
 pub mod metrics;
-pub mod metrics_http;
 pub mod modbus;
 pub mod modbus_guard;
 pub mod mqtt;

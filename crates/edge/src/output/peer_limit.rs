@@ -1,5 +1,5 @@
 //! The per-address connection limit both TCP servers apply (Modbus, [`super::tcp_conns`]; metrics,
-//! [`super::metrics_http`]): a few hosts holding connections open take a few slots, never all of
+//! [`crate::web`]): a few hosts holding connections open take a few slots, never all of
 //! them. What a server does at the limit is its own: the Modbus server closes an older connection
 //! of that address, the metrics endpoint refuses the new one.
 

@@ -7,7 +7,7 @@
 //!     -> Shared health <- console thread, keepalive task, live view
 //!     -> HistorySender (bounded, drop and count) -> fme-history thread -> day files (docs/history.md)
 //!     -> MqttSender (bounded, drop oldest and count) -> fme-mqtt thread -> broker (docs/mqtt.md)
-//! Shared health + RegisterBank counters <- metrics task (GET /metrics, a copy per scrape; docs/metrics.md)
+//! Shared health + RegisterBank counters <- web server task (pages, JSON API, GET /metrics; docs/web.md)
 //! ```
 //! The pipeline thread pings the systemd watchdog each loop turn (a stuck `Pipeline::process` stops
 //! the pings and systemd restarts the service); a camera outage does not (the loop keeps turning).
@@ -148,7 +148,8 @@ pub struct Daemon {
     server_stops: Vec<tokio::sync::oneshot::Sender<()>>,
     server_tasks: Vec<tokio::task::JoinHandle<()>>,
     client_task: Option<tokio::task::JoinHandle<()>>,
-    metrics: Option<crate::output::metrics_http::MetricsServer>,
+    /// The HTTP server's bound addresses (`[web] listen`, `[output.metrics] listen`).
+    http_addrs: (Option<SocketAddr>, Option<SocketAddr>),
     /// Every thread and task, each stopped by the shutdown (tasks first).
     parts: Vec<Subsystem>,
     finished: tokio::sync::watch::Receiver<bool>,
@@ -214,8 +215,10 @@ impl Daemon {
         let (server_stops, server_tasks, client_task) = (roles.server_stops, roles.server_tasks, roles.client_task);
         let serial_tx = roles.serial_tx;
         parts.extend(roles.serial_thread.map(Subsystem::Thread));
-        // The Prometheus endpoint: a port it cannot bind is logged and shown, never fatal.
-        let metrics = crate::output::metrics_http::spawn(&cfg.output.metrics, timing.stale_after, &shared, &bank).await;
+        // The web pages and the Prometheus endpoint: a port it cannot bind is logged and shown, never fatal.
+        let http = crate::web::spawn(&cfg, timing.stale_after, &shared, &bank).await;
+        let http_addrs = http.as_ref().map_or((None, None), |h| (h.web_addr, h.metrics_addr));
+        parts.extend(http.map(crate::web::WebServer::into_subsystem));
         parts.extend(subsystem::start_console(&cfg, &shared, &bank)?);
         let (queue, capture) = subsystem::start_capture(&cfg, source, &shared)?;
         parts.push(capture);
@@ -257,7 +260,7 @@ impl Daemon {
             server_stops,
             server_tasks,
             client_task,
-            metrics,
+            http_addrs,
             parts: tasks,
             finished,
             serial_tx,
@@ -296,7 +299,12 @@ impl Daemon {
 
     /// The bound address of the Prometheus endpoint (`output.metrics.listen`), if it serves.
     pub fn metrics_addr(&self) -> Option<SocketAddr> {
-        self.metrics.as_ref().map(|m| m.addr)
+        self.http_addrs.1
+    }
+
+    /// The bound address of the web pages (`web.listen`), if they serve.
+    pub fn web_addr(&self) -> Option<SocketAddr> {
+        self.http_addrs.0
     }
 
     /// Resolves when the pipeline thread ends by itself: `true` at the end of a non-looping recording
@@ -332,9 +340,6 @@ impl Daemon {
         }
         for t in self.server_tasks.drain(..) {
             let _ = tokio::time::timeout(Duration::from_millis(200), t).await;
-        }
-        if let Some(m) = self.metrics.take() {
-            m.stop().await;
         }
         self.serial_tx = None;
         // Threads notice `stopping` within ~100 ms; a camera blocked in the driver is not waited for.

@@ -95,7 +95,9 @@ impl LoopState {
     fn frame(&mut self, c: &mut PipelineCtx, frame: &Frame) {
         // The fish are copied out only on frames that may carry an update (the console reads them).
         let may_publish = self.is_due(frame.timestamp.get(), c.output_period_s);
-        let result = self.process(c, frame, may_publish);
+        // A web page waiting for the picture: this frame's overlays are kept for it.
+        let preview = c.shared.preview.wanted();
+        let result = self.process(c, frame, may_publish, preview);
         let now = Instant::now();
         self.processed += 1;
         let ts = frame.timestamp.get();
@@ -114,6 +116,9 @@ impl LoopState {
                 None
             }
         };
+        if preview {
+            self.offer_preview(c, frame, sample);
+        }
         if let Some(r) = c.recorder.as_mut() {
             // Never waits: a full queue drops the frame from the recording (counted).
             r.after_frame(frame, &self.overlays, &*c.pipeline, sample);
@@ -149,8 +154,9 @@ impl LoopState {
         c: &mut PipelineCtx,
         frame: &Frame,
         keep_fish: bool,
+        preview: bool,
     ) -> Result<Option<ActivitySample>, PipelineError> {
-        let (fish, overlays, record) = (&mut self.fish, &mut self.overlays, c.recorder.is_some());
+        let (fish, overlays, record) = (&mut self.fish, &mut self.overlays, c.recorder.is_some() || preview);
         let result = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             c.pipeline.process(frame).map(|o| {
                 if keep_fish {
@@ -176,6 +182,20 @@ impl LoopState {
                 Err(e)
             }
         }
+    }
+
+    /// Hands a copy of `frame` and what `snap` draws on it to the web page waiting for it.
+    fn offer_preview(&self, c: &PipelineCtx, frame: &Frame, sample: Option<ActivitySample>) {
+        c.shared.preview.offer(|| {
+            let mut overlays = self.overlays.clone();
+            c.pipeline.reference_residuals(&mut overlays.references);
+            crate::web::preview::PreviewFrame {
+                frame: frame.clone(),
+                overlays,
+                sample,
+                jpeg: std::sync::OnceLock::new(),
+            }
+        });
     }
 
     /// `--series`: the writer thread has the disk; the pipeline never waits on it.

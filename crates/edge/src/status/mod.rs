@@ -383,6 +383,8 @@ pub struct Shared {
     /// The Modbus role's state for the console's `status` (set once at start: the role, where it
     /// serves, and whether it is open to every address); unset = off.
     pub modbus: OnceLock<String>,
+    /// The latest frame the web page asked for (`/api/latest.jpg`), handed over by the pipeline.
+    pub preview: crate::web::preview::Preview,
 }
 
 impl Shared {
@@ -399,6 +401,7 @@ impl Shared {
             metrics: MetricsStatus::default(),
             word_order: OnceLock::new(),
             modbus: OnceLock::new(),
+            preview: crate::web::preview::Preview::default(),
         }
     }
 

@@ -8,7 +8,7 @@
 //! one row in `docs/metrics.md`); the text format is `exposition`.
 //!
 //! The HTTP server, its connection limits and its defences against a hostile LAN are in
-//! [`super::metrics_http`].
+//! [`crate::web`].
 //!
 //! Text format: <https://prometheus.io/docs/instrumenting/exposition_formats/> (0.0.4): `# HELP` and
 //! `# TYPE` once per family before its samples, label values escaped (`\\`, `\"`, `\n`), HELP text

@@ -1,8 +1,8 @@
 //! Who may connect: the per-address limit ([`PeerLimit`]), the total limit, and the steady scrapers
-//! that a stalling connection makes room for (see the module docs of [`super`]).
+//! that a stalling connection makes room for (see [`super::listener`]).
 
-use super::super::peer_limit::PeerLimit;
-use super::{HttpLimits, PRIORITY_SCRAPES, PRIORITY_WINDOW};
+use super::listener::{HttpLimits, PRIORITY_SCRAPES, PRIORITY_WINDOW};
+use crate::output::peer_limit::PeerLimit;
 use std::collections::HashMap;
 use std::net::IpAddr;
 use std::sync::{Arc, Mutex};

@@ -1,19 +1,33 @@
-use super::request::head_end;
+use super::request::{Head, head_end, read_head};
 use super::*;
+use crate::config::allow::AllowList;
+use std::sync::atomic::Ordering;
+use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
 
-#[test]
-fn routes() {
-    let r = |s: &str| route(s.as_bytes());
-    assert_eq!(r("GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n"), Route::Metrics { head: false });
-    assert_eq!(r("GET /metrics?x=1 HTTP/1.0\n\n"), Route::Metrics { head: false });
-    assert_eq!(r("HEAD /metrics HTTP/1.1\r\n\r\n"), Route::Metrics { head: true });
-    assert_eq!(r("POST /metrics HTTP/1.1\r\n\r\n"), Route::Error(405));
-    assert_eq!(r("DELETE /metrics HTTP/1.1\r\n\r\n"), Route::Error(405));
-    assert_eq!(r("GET / HTTP/1.1\r\n\r\n"), Route::Error(404));
-    assert_eq!(r("GET /metricsx HTTP/1.1\r\n\r\n"), Route::Error(404));
-    assert_eq!(r("POST /other HTTP/1.1\r\n\r\n"), Route::Error(404));
+/// The status code of a raw request sent to the metrics listener at `addr` (0: closed unanswered).
+async fn code_of(addr: SocketAddr, raw: &[u8]) -> (u16, String) {
+    let mut s = connect_from([127, 0, 0, 1], addr).await;
+    let _ = s.write_all(raw).await;
+    let mut buf = Vec::new();
+    let _ = tokio::time::timeout(Duration::from_secs(5), s.read_to_end(&mut buf)).await;
+    let text = String::from_utf8_lossy(&buf).into_owned();
+    let code = text.get(9..12).and_then(|c| c.parse().ok()).unwrap_or(0);
+    (code, text)
+}
+
+#[tokio::test]
+async fn routes() {
+    let (addr, _shared, _stop) = start(limits(8, 8)).await;
+    let r = |s: &'static str| code_of(addr, s.as_bytes());
+    assert_eq!(r("GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n").await.0, 200);
+    assert_eq!(r("GET /metrics?x=1 HTTP/1.0\n\n").await.0, 200);
+    assert_eq!(r("HEAD /metrics HTTP/1.1\r\n\r\n").await.0, 200);
+    assert_eq!(r("POST /metrics HTTP/1.1\r\n\r\n").await.0, 405);
+    assert_eq!(r("DELETE /metrics HTTP/1.1\r\n\r\n").await.0, 405);
+    assert_eq!(r("GET / HTTP/1.1\r\n\r\n").await.0, 404);
+    assert_eq!(r("GET /metricsx HTTP/1.1\r\n\r\n").await.0, 404);
+    assert_eq!(r("POST /other HTTP/1.1\r\n\r\n").await.0, 404);
     for bad in [
-        "",
         "\r\n\r\n",
         "GET\r\n\r\n",
         "GET /metrics\r\n\r\n",
@@ -23,9 +37,10 @@ fn routes() {
         "GET  /metrics HTTP/1.1\r\n\r\n",
         "GET /metrics HTTP/1.1 x\r\n\r\n",
     ] {
-        assert_eq!(r(bad), Route::Error(400), "{bad:?}");
+        assert_eq!(r(bad).await.0, 400, "{bad:?}");
     }
-    assert_eq!(route(b"GET /\xff\xfe HTTP/1.1\r\n\r\n"), Route::Error(400));
+    assert!(!request_line_ok(b""));
+    assert_eq!(code_of(addr, b"GET /\xff\xfe HTTP/1.1\r\n\r\n").await.0, 400);
 }
 
 #[test]
@@ -39,10 +54,11 @@ fn head_end_across_reads() {
 #[tokio::test]
 async fn oversized_and_truncated_heads() {
     let mut buf = Box::new([0u8; MAX_HEAD]);
+    let mut len = 0;
     let big = vec![b'A'; MAX_HEAD + 10];
-    assert_eq!(read_head(&mut big.as_slice(), &mut buf).await, Head::TooLarge);
-    assert_eq!(read_head(&mut &b"GET /metrics HTTP/1.1\r\n"[..], &mut buf).await, Head::Closed);
-    assert_eq!(read_head(&mut &b"GET /metrics HTTP/1.1\r\n\r\n"[..], &mut buf).await, Head::Complete(25));
+    assert_eq!(read_head(&mut big.as_slice(), &mut buf, &mut len).await, Head::TooLarge);
+    assert_eq!(read_head(&mut &b"GET /metrics HTTP/1.1\r\n"[..], &mut buf, &mut len).await, Head::Closed);
+    assert_eq!(read_head(&mut &b"GET /metrics HTTP/1.1\r\n\r\n"[..], &mut buf, &mut len).await, Head::Complete(25));
 }
 
 /// Connects from `ip` (any 127/8 address reaches a loopback listener on Linux).
@@ -60,22 +76,21 @@ async fn closed_unanswered(mut s: tokio::net::TcpStream) -> bool {
     matches!(r, Ok(Ok(0)) | Ok(Err(_)))
 }
 
-/// Serves on a loopback port within `limits`; the shared state and the stop signal.
-async fn start(limits: HttpLimits) -> (SocketAddr, Arc<Shared>, tokio::sync::oneshot::Sender<()>) {
+/// Serves the metrics listener on a loopback port within `limits`; the shared state and the task.
+async fn start(limits: HttpLimits) -> (SocketAddr, Arc<Shared>, tokio::task::JoinHandle<()>) {
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
     let addr = listener.local_addr().expect("addr");
     let shared = Arc::new(Shared::new(String::new(), 16));
-    let ctx = Ctx {
-        shared: shared.clone(),
-        bank: Arc::new(RegisterBank::new()),
-        stale_after: Duration::from_secs(5),
+    let cfg = Config::default();
+    let state = Arc::new(WebState::new(&cfg, Duration::from_secs(5), &shared, &Arc::new(RegisterBank::new())));
+    let ctx = ConnCtx {
+        kind: Kind::Metrics,
+        state: state.clone(),
+        router: routes::metrics_only(state),
         header_timeout: limits.header_timeout,
     };
-    let (stop, rx) = tokio::sync::oneshot::channel::<()>();
-    tokio::spawn(serve(listener, limits, ctx, async move {
-        let _ = rx.await;
-    }));
-    (addr, shared, stop)
+    let task = tokio::spawn(listener::serve(listener, limits, Arc::new(ctx)));
+    (addr, shared, task)
 }
 
 fn limits(max_connections: usize, max_per_peer: usize) -> HttpLimits {
@@ -150,14 +165,20 @@ async fn allow_list_refuses_others() {
     assert_eq!(shared.metrics.refused.load(Ordering::Relaxed), 1);
 }
 
-#[test]
-fn responses_carry_length_and_type() {
-    let r = String::from_utf8(response(200, "abc\n", false)).unwrap_or_default();
+#[tokio::test]
+async fn responses_carry_length_and_type() {
+    let (addr, _shared, _stop) = start(limits(8, 8)).await;
+    let (code, r) = code_of(addr, b"GET /metrics HTTP/1.1\r\n\r\n").await;
+    assert_eq!(code, 200, "{r}");
     assert!(r.starts_with("HTTP/1.1 200 OK\r\n"), "{r}");
     assert!(r.contains("Content-Type: text/plain; version=0.0.4; charset=utf-8\r\n"), "{r}");
-    assert!(r.contains("Content-Length: 4\r\n") && r.ends_with("\r\n\r\nabc\n"), "{r}");
-    let h = String::from_utf8(response(200, "abc\n", true)).unwrap_or_default();
-    assert!(h.contains("Content-Length: 4\r\n") && h.ends_with("\r\n\r\n"), "HEAD: no body: {h}");
-    let e = String::from_utf8(response(405, "no\n", false)).unwrap_or_default();
-    assert!(e.starts_with("HTTP/1.1 405 Method Not Allowed\r\n") && e.contains("Allow: GET, HEAD\r\n"), "{e}");
+    let (head, body) = r.split_once("\r\n\r\n").unwrap_or_default();
+    assert!(head.contains(&format!("Content-Length: {}", body.len())), "{r}");
+    let (_, h) = code_of(addr, b"HEAD /metrics HTTP/1.1\r\n\r\n").await;
+    assert!(h.contains("Content-Length: ") && h.ends_with("\r\n\r\n"), "HEAD: no body: {h}");
+    let (code, e) = code_of(addr, b"POST /metrics HTTP/1.1\r\nContent-Length: 2\r\n\r\nno").await;
+    assert!(
+        code == 405 && e.starts_with("HTTP/1.1 405 Method Not Allowed\r\n") && e.contains("Allow: GET, HEAD\r\n"),
+        "{e}"
+    );
 }
