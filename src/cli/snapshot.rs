@@ -78,7 +78,7 @@ pub fn run(args: SnapshotArgs) -> anyhow::Result<()> {
     };
     let path = crate::record::snapshot_now(
         &dir,
-        &cfg.source.path,
+        &cfg.source.name(),
         &frame,
         &overlays,
         &*pipeline,

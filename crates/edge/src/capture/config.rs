@@ -86,6 +86,11 @@ impl SourceConfig {
         self.kind != SourceKind::Auto || self.path.starts_with("/dev")
     }
 
+    /// What captions and logs call the source: an IP camera's URL (it holds no password), else `path`.
+    pub fn name(&self) -> PathBuf {
+        if self.is_ip_camera() { PathBuf::from(&self.url) } else { self.path.clone() }
+    }
+
     /// Whether the source is an IP camera (`kind = "rtsp"` or `"mjpeg"`) rather than `path`.
     pub fn is_ip_camera(&self) -> bool {
         self.kind != SourceKind::Auto
@@ -143,5 +148,27 @@ impl Default for SourceConfig {
             credentials_file: PathBuf::new(),
             transport: RtspTransport::Tcp,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ip_camera_urls_are_checked_and_hold_no_password() {
+        let rtsp = |url: &str| SourceConfig { kind: SourceKind::Rtsp, url: url.into(), ..SourceConfig::default() };
+        assert!(rtsp("rtsp://10.0.0.5:554/Streaming/Channels/102").validate().is_ok());
+        let key = |c: SourceConfig| c.validate().map_err(|e| (e.key.clone(), e.to_string())).err();
+        let (k, m) = key(rtsp("http://cam/video")).expect("wrong scheme");
+        assert!(k == "source.url" && m.contains("rtsp://"), "{m}");
+        let (_, m) = key(rtsp("rtsp://admin:hunter2@cam/live")).expect("password in the URL");
+        assert!(m.contains("credentials_file"), "{m}");
+        assert!(key(rtsp("rtsp:///path")).is_some(), "no host");
+        let mjpeg =
+            SourceConfig { kind: SourceKind::Mjpeg, url: "http://cam:8080/video".into(), ..SourceConfig::default() };
+        assert!(mjpeg.validate().is_ok() && mjpeg.is_camera() && mjpeg.is_ip_camera());
+        assert_eq!(mjpeg.name(), PathBuf::from("http://cam:8080/video"));
+        assert!(!SourceConfig { path: "tests/data/swarm20".into(), ..SourceConfig::default() }.is_camera());
     }
 }
