@@ -208,3 +208,25 @@ fn mjpeg_camera_frames_arrive_decoded_with_part_timestamps() {
     let e = anon.reopen().expect_err("401").to_string();
     assert!(e.contains("401") && e.contains("credentials_file"), "{e}");
 }
+
+#[test]
+fn snapshot_of_an_rtsp_camera_and_its_error_on_a_wrong_path() {
+    let server = GstServer::start(0);
+    let out = tempfile::tempdir().expect("tempdir");
+    let snapshot = |url: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_fme"))
+            .args(["snapshot", "--source", url, "--frames", "10", "--out"])
+            .arg(out.path())
+            .output()
+            .expect("run fme snapshot")
+    };
+    let ok = snapshot(&server.url("/h264"));
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let jpeg = String::from_utf8_lossy(&ok.stdout).trim().to_string();
+    let img = image::open(&jpeg).expect("the snapshot JPEG");
+    assert_eq!((img.width(), img.height()), (640, 384));
+    let bad = snapshot(&server.url("/nope"));
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert_eq!(bad.status.code(), Some(2), "{err}");
+    assert!(err.contains("404") && err.contains("source.url"), "{err}");
+}

@@ -46,7 +46,14 @@ pub fn run(args: SnapshotArgs) -> anyhow::Result<()> {
     if args.frames == 0 {
         return Err(UsageError("--frames: must be >= 1".into()).into());
     }
-    let mut source = crate::cli::run::open_source(&cfg)?;
+    // A camera that cannot be opened is the command's error here (the daemon would retry).
+    let mut source = if cfg.source.is_camera() {
+        let mut cam = crate::capture::camera(&cfg.source).map_err(|e| UsageError(format!("source: {e}")))?;
+        cam.reopen().map_err(|e| UsageError(format!("source: {e}")))?;
+        cam
+    } else {
+        crate::cli::run::open_source(&cfg)?
+    };
     let mut pipeline = crate::service::build_pipeline(&cfg).map_err(|e| UsageError(e.to_string()))?;
     let mut last = None;
     let mut buf = Vec::new();
