@@ -230,3 +230,15 @@ fn snapshot_of_an_rtsp_camera_and_its_error_on_a_wrong_path() {
     assert_eq!(bad.status.code(), Some(2), "{err}");
     assert!(err.contains("404") && err.contains("source.url"), "{err}");
 }
+
+#[test]
+fn udp_transport_gives_frames_on_the_rtp_clock() {
+    let server = GstServer::start(0);
+    let cfg = SourceConfig { transport: fme::config::RtspTransport::Udp, ..rtsp_source(&server.url("/h264"), 5000) };
+    let mut src = RtspSource::new(cfg).expect("source");
+    src.reopen().expect("connect over UDP");
+    assert!(src.describe().contains("udp"), "{}", src.describe());
+    let t: Vec<f64> = (0..15).map(|_| src.next_frame(Vec::new()).expect("frame").timestamp.get()).collect();
+    // Loopback loses nothing: consecutive frames 1/30 s apart on the RTP clock.
+    assert!(t.windows(2).all(|w| (w[1] - w[0] - 1.0 / 30.0).abs() < 1.5 / 90_000.0), "{t:?}");
+}
