@@ -18,6 +18,9 @@ use std::path::PathBuf;
 use std::pin::Pin;
 use std::time::{Duration, Instant};
 
+/// Longest wait, beyond `source.timeout_ms`, for a session's first key frame.
+const KEY_FRAME_WAIT: Duration = Duration::from_secs(10);
+
 /// An RTSP camera (`source.kind = "rtsp"`).
 pub struct RtspSource {
     cfg: SourceConfig,
@@ -30,6 +33,8 @@ pub struct RtspSource {
     /// Frames lost on the way: RTP packet loss, undecodable or out-of-order frames.
     lost: u64,
     size: Option<(u32, u32)>,
+    /// Whether this session has decoded a picture yet (the first waits for a key frame).
+    pictured: bool,
 }
 
 impl std::fmt::Debug for RtspSource {
@@ -58,6 +63,7 @@ impl RtspSource {
             seq: 0,
             lost: 0,
             size: None,
+            pictured: false,
         })
     }
 
@@ -162,7 +168,16 @@ fn rtsp_error(e: &retina::Error) -> String {
 impl FrameSource for RtspSource {
     fn next_frame(&mut self, mut buf: Vec<u8>) -> Result<Frame, CaptureError> {
         let timeout = Duration::from_millis(self.cfg.timeout_ms);
+        // Packets that never make a picture (an undecodable stream) stall the camera like silence;
+        // a session's first picture may wait for the camera's next key frame (GOPs of several s).
+        let wait = if self.pictured { timeout } else { timeout + KEY_FRAME_WAIT };
+        let deadline = Instant::now() + wait;
         loop {
+            if Instant::now() > deadline {
+                self.close();
+                let message = format!("no H.264 picture decoded within {} ms", wait.as_millis());
+                return Err(CaptureError::Read { path: self.path(), message });
+            }
             let Some(session) = self.session.as_mut() else {
                 return Err(CaptureError::Read { path: self.path(), message: "stream not open".into() });
             };
@@ -204,6 +219,7 @@ impl FrameSource for RtspSource {
                 continue;
             };
             self.size = Some(size);
+            self.pictured = true;
             let frame = Frame {
                 seq: self.seq,
                 timestamp: Seconds(t),
@@ -236,6 +252,7 @@ impl FrameSource for RtspSource {
         self.decoder =
             Some(openh264::decoder::Decoder::new().map_err(|e| self.open_err(format!("H.264 decoder: {e}")))?);
         self.session = Some(Box::pin(demuxed));
+        self.pictured = false;
         Ok(())
     }
 
