@@ -242,3 +242,29 @@ fn udp_transport_gives_frames_on_the_rtp_clock() {
     // Loopback loses nothing: consecutive frames 1/30 s apart on the RTP clock.
     assert!(t.windows(2).all(|w| (w[1] - w[0] - 1.0 / 30.0).abs() < 1.5 / 90_000.0), "{t:?}");
 }
+
+#[test]
+fn config_check_reads_the_login_file_and_shows_only_its_path() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let login = dir.path().join("camera.login");
+    std::fs::write(&login, "admin:hunter2\n").expect("write");
+    let run = |args: &[&str], toml: &str| {
+        let cfg = dir.path().join("fme.toml");
+        std::fs::write(&cfg, toml).expect("write config");
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_fme")).args(args).arg(&cfg).output().expect("fme");
+        let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        assert!(!text.contains("hunter2"), "{text}");
+        (out.status.code(), text)
+    };
+    let section = |url: &str, file: &Path| {
+        format!("[source]\nkind = \"rtsp\"\nurl = \"{url}\"\ncredentials_file = \"{}\"\n", file.display())
+    };
+    let (code, text) = run(&["config", "show"], &section("rtsp://cam/live", &login));
+    assert_eq!(code, Some(0), "{text}");
+    assert!(text.contains(&format!("credentials_file = \"{}\"", login.display())), "{text}");
+    assert_eq!(run(&["config", "check"], &section("rtsp://cam/live", &login)).0, Some(0));
+    let (code, text) = run(&["config", "check"], &section("rtsp://cam/live", &dir.path().join("none")));
+    assert!(code == Some(2) && text.contains("source.credentials_file"), "{text}");
+    let (code, text) = run(&["config", "check"], &section("rtsp://admin:hunter2@cam/live", &login));
+    assert!(code == Some(2) && text.contains("source.url"), "{text}");
+}

@@ -23,8 +23,7 @@ pub fn read_login(path: &Path) -> Result<Option<Login>, String> {
     if path.as_os_str().is_empty() {
         return Ok(None);
     }
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("source.credentials_file {}: {}", path.display(), e.kind()))?;
+    let text = std::fs::read_to_string(path).map_err(|e| format!("source.credentials_file {}: {e}", path.display()))?;
     let line = text.lines().next().unwrap_or_default().trim_end_matches('\r');
     match line.split_once(':') {
         Some((user, password)) if !user.is_empty() => {
