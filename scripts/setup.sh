@@ -22,9 +22,10 @@ command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ] || need_apt+=
 # socat: the documented way to reach the console without a serial port (tests/daemon/console_socat.rs).
 command -v socat >/dev/null 2>&1 || need_apt+=(socat)
 # GStreamer's RTSP server with x264enc: the real IP camera the RTSP tests start on a loopback port
-# (tests/rtsp.rs, tests/rtsp_server.py); nasm: openh264's assembly (faster H.264 decoding).
+# (tests/rtsp.rs, tests/rtsp_server.py), x265enc (plugins-bad) for its H.265 camera; nasm: openh264's
+# assembly (faster H.264 decoding).
 for p in gstreamer1.0-tools gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-plugins-ugly \
-  gir1.2-gst-rtsp-server-1.0 python3-gi nasm; do
+  gstreamer1.0-plugins-bad gir1.2-gst-rtsp-server-1.0 python3-gi nasm; do
   dpkg -s "$p" >/dev/null 2>&1 || need_apt+=("$p")
 done
 if [ ${#need_apt[@]} -gt 0 ]; then
