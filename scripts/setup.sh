@@ -24,6 +24,13 @@ command -v socat >/dev/null 2>&1 || need_apt+=(socat)
 # The web page's browser test (tests/web_browser.rs) drives headless Chromium through chromedriver.
 command -v chromium >/dev/null 2>&1 || need_apt+=(chromium)
 command -v chromedriver >/dev/null 2>&1 || need_apt+=(chromium-driver)
+# GStreamer's RTSP server with x264enc: the real IP camera the RTSP tests start on a loopback port
+# (tests/rtsp.rs, tests/rtsp_server.py), x265enc (plugins-bad) for its H.265 camera; nasm: openh264's
+# assembly (faster H.264 decoding).
+for p in gstreamer1.0-tools gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-plugins-ugly \
+  gstreamer1.0-plugins-bad gir1.2-gst-rtsp-server-1.0 python3-gi nasm; do
+  dpkg -s "$p" >/dev/null 2>&1 || need_apt+=("$p")
+done
 if [ ${#need_apt[@]} -gt 0 ]; then
   echo "setup: installing ${need_apt[*]} with apt" >&2
   $SUDO apt-get update -q >/dev/null

@@ -303,16 +303,16 @@ fn summary(args: &CalibrateArgs, refs: &[Reference], sol: &calib::Solution, out:
 /// Grabs the sixth frame (after exposure settles) from a V4L2 camera or a recorded sequence
 /// (`SourceConfig::is_camera`, as for `fme run --source`), and writes it to `out`.
 fn grab(src: &Path, config: &super::ConfigArgs, out: &Path) -> anyhow::Result<image::RgbImage> {
-    use crate::capture::{CaptureError, FrameSource, RecordedSource, V4l2Source};
-    let (cfg, _) = config.load(&[super::set_text("source.path", &src.to_string_lossy())])?;
+    use crate::capture::{CaptureError, FrameSource, RecordedSource};
+    let (cfg, _) = config.load(&super::source_sets(src))?;
     let open_err = |e: CaptureError| match e {
         e @ (CaptureError::NotFound { .. } | CaptureError::Open { .. }) => usage(format!("--source: {e}")),
         e => anyhow::Error::new(e).context("--source"),
     };
     let mut source: Box<dyn FrameSource> = if cfg.source.is_camera() {
-        let mut cam = V4l2Source::new(cfg.source.clone());
+        let mut cam = crate::capture::camera(&cfg.source).map_err(open_err)?;
         cam.reopen().map_err(open_err)?;
-        Box::new(cam)
+        cam
     } else {
         Box::new(RecordedSource::open(src, false, false).map_err(open_err)?)
     };

@@ -72,6 +72,16 @@ pub fn set_text(key: &str, value: &str) -> String {
     format!("{key}={}", toml_edit::Value::from(value))
 }
 
+/// The `--set`s of a `--source`: an `rtsp://` or `http://` URL is an IP camera (`source.kind` and
+/// `source.url`), anything else `source.path` (a V4L2 device or a recording).
+pub fn source_sets(source: &std::path::Path) -> Vec<String> {
+    let text = source.to_string_lossy();
+    match ["rtsp", "mjpeg"].into_iter().zip(["rtsp://", "http://"]).find(|(_, scheme)| text.starts_with(scheme)) {
+        Some((kind, _)) => vec![set_text("source.kind", kind), set_text("source.url", &text)],
+        None => vec![set_text("source.path", &text)],
+    }
+}
+
 /// A `--set` assignment of a value that is already TOML (a number, a bool, an enum name).
 pub fn set_value(key: &str, value: impl std::fmt::Display) -> String {
     format!("{key}={value}")

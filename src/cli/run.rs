@@ -1,6 +1,6 @@
 //! `fme run`: Run the edge daemon: camera or recording in, PLC and serial out.
 
-use crate::capture::{CaptureError, FrameSource, RecordedSource, V4l2Source};
+use crate::capture::{CaptureError, FrameSource, RecordedSource};
 use crate::cli::{ConfigArgs, UsageError, set_text, set_value};
 use crate::config::Config;
 use crate::service::signals::{SignalEvent, Signals};
@@ -14,8 +14,9 @@ pub struct RunArgs {
     /// The configuration.
     #[command(flatten)]
     pub config: ConfigArgs,
-    /// Frame source (`--set source.path=...`): a V4L2 device (/dev/videoN) or a MOTChallenge
-    /// sequence directory.
+    /// Frame source (`--set source.path=...`): a V4L2 device (/dev/videoN), a MOTChallenge
+    /// sequence directory, or an IP camera's `rtsp://` or `http://` (MJPEG) URL (`--set
+    /// source.kind=... --set source.url=...`).
     #[arg(long)]
     pub source: Option<PathBuf>,
     /// Serve Modbus TCP on HOST:PORT (`--set output.modbus.mode=tcp-server --set
@@ -46,7 +47,7 @@ impl RunArgs {
     fn sugar(&self) -> anyhow::Result<Vec<String>> {
         let mut s = Vec::new();
         if let Some(p) = &self.source {
-            s.push(set_text("source.path", &p.to_string_lossy()));
+            s.extend(crate::cli::source_sets(p));
         }
         if let Some(l) = &self.modbus_listen {
             if !crate::config::is_host_port(l) {
@@ -78,11 +79,11 @@ pub fn effective_config(args: &RunArgs) -> anyhow::Result<(Config, String)> {
 pub fn open_source(cfg: &Config) -> anyhow::Result<Box<dyn FrameSource>> {
     let path = &cfg.source.path;
     if cfg.source.is_camera() {
-        let mut cam = V4l2Source::new(cfg.source.clone());
+        let mut cam = crate::capture::camera(&cfg.source).map_err(|e| UsageError(format!("source: {e}")))?;
         if let Err(e) = cam.reopen() {
-            tracing::error!("camera {}: {e}; retrying with backoff (status bit 1 clear, fault code 1)", path.display());
+            tracing::error!("camera: {e}; retrying with backoff (status bit 1 clear, fault code 1)");
         }
-        return Ok(Box::new(cam));
+        return Ok(cam);
     }
     match RecordedSource::open(path, cfg.source.realtime, cfg.source.looping) {
         Ok(s) => Ok(Box::new(s)),

@@ -4,7 +4,7 @@
 //! docs/recording.md.
 
 use crate::capture::CaptureError;
-use crate::cli::{ConfigArgs, UsageError, set_text};
+use crate::cli::{ConfigArgs, UsageError};
 use std::path::PathBuf;
 
 /// Arguments of `fme snapshot`.
@@ -13,7 +13,8 @@ pub struct SnapshotArgs {
     /// The configuration.
     #[command(flatten)]
     pub config: ConfigArgs,
-    /// Frame source (`--set source.path=...`).
+    /// Frame source (`--set source.path=...`): a V4L2 device, a recording, or an IP camera's
+    /// `rtsp://` or `http://` (MJPEG) URL (`--set source.kind=... --set source.url=...`).
     #[arg(long)]
     pub source: Option<PathBuf>,
     /// Frames run through the pipeline before the snapshot (so tracks, a depth fit and an activity
@@ -29,7 +30,7 @@ pub struct SnapshotArgs {
 pub fn run(args: SnapshotArgs) -> anyhow::Result<()> {
     let mut sugar = vec![crate::cli::set_value("source.realtime", false), crate::cli::set_value("source.loop", false)];
     if let Some(p) = &args.source {
-        sugar.push(set_text("source.path", &p.to_string_lossy()));
+        sugar.extend(crate::cli::source_sets(p));
     }
     let (cfg, _) = args.config.load(&sugar)?;
     let dir = match (&args.out, crate::status::state_dir(&cfg)) {
@@ -45,7 +46,14 @@ pub fn run(args: SnapshotArgs) -> anyhow::Result<()> {
     if args.frames == 0 {
         return Err(UsageError("--frames: must be >= 1".into()).into());
     }
-    let mut source = crate::cli::run::open_source(&cfg)?;
+    // A camera that cannot be opened is the command's error here (the daemon would retry).
+    let mut source = if cfg.source.is_camera() {
+        let mut cam = crate::capture::camera(&cfg.source).map_err(|e| UsageError(format!("source: {e}")))?;
+        cam.reopen().map_err(|e| UsageError(format!("source: {e}")))?;
+        cam
+    } else {
+        crate::cli::run::open_source(&cfg)?
+    };
     let mut pipeline = crate::service::build_pipeline(&cfg).map_err(|e| UsageError(e.to_string()))?;
     let mut last = None;
     let mut buf = Vec::new();
@@ -69,15 +77,15 @@ pub fn run(args: SnapshotArgs) -> anyhow::Result<()> {
                 }
             }
             Err(CaptureError::End) => break,
-            Err(e) => return Err(UsageError(format!("source {}: {e}", cfg.source.path.display())).into()),
+            Err(e) => return Err(UsageError(format!("source {}: {e}", source.describe())).into()),
         }
     }
     let Some((frame, sample)) = last else {
-        return Err(UsageError(format!("source {}: no frame", cfg.source.path.display())).into());
+        return Err(UsageError(format!("source {}: no frame", source.describe())).into());
     };
     let path = crate::record::snapshot_now(
         &dir,
-        &cfg.source.path,
+        &cfg.source.name(),
         &frame,
         &overlays,
         &*pipeline,

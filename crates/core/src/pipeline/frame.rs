@@ -12,6 +12,14 @@ pub enum PixelFormat {
     Yuyv,
     /// 8-bit grey, `width * height` bytes.
     Gray8,
+    /// Planar YUV 4:2:0 (I420: the Y plane, then U and V at half width and height, rounded up), as
+    /// an H.264 decoder gives it: kept planar so only the frames the networks run on are converted.
+    I420,
+}
+
+/// Bytes of an I420 frame of `w` x `h` px (chroma planes rounded up for odd sizes).
+pub fn i420_len(w: usize, h: usize) -> usize {
+    w * h + 2 * w.div_ceil(2) * h.div_ceil(2)
 }
 
 /// One captured frame. The bytes stay encoded: decoding is the pipeline's job, so capture never
@@ -51,6 +59,13 @@ impl Frame {
             }
             PixelFormat::Gray8 => image::GrayImage::from_raw(self.width, self.height, self.data.clone())
                 .ok_or_else(|| format!("grey frame has {} bytes, expected {}", self.data.len(), w * h)),
+            PixelFormat::I420 => {
+                if self.data.len() < i420_len(w, h) {
+                    return Err(format!("I420 frame has {} bytes, expected {}", self.data.len(), i420_len(w, h)));
+                }
+                image::GrayImage::from_raw(self.width, self.height, self.data[..w * h].to_vec())
+                    .ok_or_else(|| "bad I420 size".to_string())
+            }
         }
     }
 }
@@ -65,7 +80,7 @@ impl Frame {
                     .into_dimensions()
                     .map_err(|e| e.to_string())
             }
-            PixelFormat::Yuyv | PixelFormat::Gray8 => Ok((self.width, self.height)),
+            PixelFormat::Yuyv | PixelFormat::Gray8 | PixelFormat::I420 => Ok((self.width, self.height)),
         }
     }
 
@@ -143,8 +158,35 @@ impl Frame {
                 }
                 Ok((self.width, self.height))
             }
+            PixelFormat::I420 => {
+                i420_to_rgb(&self.data, w, h, out)?;
+                Ok((self.width, self.height))
+            }
         }
     }
+}
+
+/// BT.601 limited-range I420 to packed RGB8 (the same conversion as YUYV's), into `out`.
+fn i420_to_rgb(data: &[u8], w: usize, h: usize, out: &mut Vec<u8>) -> Result<(), String> {
+    if data.len() < i420_len(w, h) {
+        return Err(format!("I420 frame has {} bytes for {w}x{h}", data.len()));
+    }
+    let cw = w.div_ceil(2);
+    let (y_plane, chroma) = data.split_at(w * h);
+    let (u_plane, v_plane) = chroma.split_at(cw * h.div_ceil(2));
+    out.resize(w * h * 3, 0);
+    for (row, o_row) in out.chunks_exact_mut(w * 3).enumerate() {
+        let (ys, us, vs) = (&y_plane[row * w..][..w], &u_plane[row / 2 * cw..][..cw], &v_plane[row / 2 * cw..][..cw]);
+        for (x, o) in o_row.chunks_exact_mut(3).enumerate() {
+            let (u, v) = (f32::from(us[x / 2]) - 128.0, f32::from(vs[x / 2]) - 128.0);
+            let c = 1.164 * (f32::from(ys[x]) - 16.0);
+            let rgb = [c + 1.596 * v, c - 0.392 * u - 0.813 * v, c + 2.017 * u];
+            for (j, x) in rgb.into_iter().enumerate() {
+                o[j] = x.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -186,6 +228,22 @@ mod tests {
             assert!(out.chunks(3).all(|p| p.iter().zip(want).all(|(a, b)| a.abs_diff(b) <= 6)), "{:?}", &out[..6]);
         }
         assert!(frame(PixelFormat::Jpeg, 8, 4, vec![0xFF, 0xD8, 0x00]).to_rgb_into(&mut out).is_err());
+    }
+
+    #[test]
+    fn i420_gives_rgb_and_luma() {
+        // 2x2 white-ish luma over pure red chroma (BT.601 limited: Y=81 U=90 V=240), and a 3x1 frame
+        // (odd width: chroma rounded up).
+        let f = frame(PixelFormat::I420, 2, 2, vec![81, 81, 81, 81, 90, 240]);
+        let mut out = Vec::new();
+        assert_eq!(f.to_rgb_into(&mut out), Ok((2, 2)));
+        assert!(out.chunks(3).all(|p| p[0] > 250 && p[1] < 5 && p[2] < 5), "{out:?}");
+        assert_eq!(f.to_luma().map(|i| i.into_raw()), Ok(vec![81; 4]));
+        let odd = frame(PixelFormat::I420, 3, 1, vec![235, 16, 235, 128, 128, 128, 128]);
+        assert_eq!(odd.to_rgb_into(&mut out), Ok((3, 1)));
+        assert_eq!(out, vec![255, 255, 255, 0, 0, 0, 255, 255, 255]);
+        assert!(frame(PixelFormat::I420, 2, 2, vec![0; 5]).to_rgb_into(&mut out).is_err(), "short");
+        assert!(frame(PixelFormat::I420, 2, 2, vec![0; 5]).to_luma().is_err(), "short");
     }
 
     #[test]

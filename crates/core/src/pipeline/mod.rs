@@ -24,7 +24,7 @@ pub use calibration::Calibration;
 pub use config::PipelineConfig;
 
 pub use fish::FishPipeline;
-pub use frame::{Frame, PixelFormat};
+pub use frame::{Frame, PixelFormat, i420_len};
 pub use outcome::FrameOutcome;
 pub use substitute::Substitute;
 // The depth fit's types, where the pipeline's users have always found them.

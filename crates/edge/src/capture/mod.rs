@@ -1,13 +1,22 @@
-//! Frame sources: V4L2 cameras and recorded sequences, behind one [`FrameSource`] trait, and the
-//! bounded drop-oldest [`FrameQueue`] that decouples capture from inference.
+//! Frame sources: V4L2 cameras, IP cameras (RTSP/H.264, MJPEG over HTTP) and recorded sequences,
+//! behind one [`FrameSource`] trait, and the bounded drop-oldest [`FrameQueue`] that decouples
+//! capture from inference.
 
+mod clock;
 pub mod config;
+mod credentials;
+mod mjpeg;
 mod queue;
 mod recorded;
+mod rtsp;
 mod v4l2;
 
+pub use clock::StreamClock;
+pub use credentials::{Login, basic_auth, read_login};
+pub use mjpeg::MjpegSource;
 pub use queue::{FrameQueue, QueueStats};
 pub use recorded::RecordedSource;
+pub use rtsp::RtspSource;
 pub use v4l2::V4l2Source;
 
 /// Frames are the pipeline's input type; capture produces them.
@@ -17,6 +26,17 @@ pub use fme_core::pipeline::{Frame, PixelFormat};
 pub use crate::backoff::Backoff;
 
 use std::path::PathBuf;
+
+/// The live camera `cfg` names (`kind = "rtsp"`, `"mjpeg"`, else the V4L2 device at `path`),
+/// not yet opened: the caller calls [`FrameSource::reopen`] (a camera that is not there yet is
+/// retried with backoff by the capture loop).
+pub fn camera(cfg: &config::SourceConfig) -> Result<Box<dyn FrameSource>, CaptureError> {
+    Ok(match cfg.kind {
+        config::SourceKind::Rtsp => Box::new(RtspSource::new(cfg.clone())?),
+        config::SourceKind::Mjpeg => Box::new(MjpegSource::new(cfg.clone())),
+        config::SourceKind::Auto => Box::new(V4l2Source::new(cfg.clone())),
+    })
+}
 
 /// A capture failure. Sources recover from these themselves where they can (reconnect with backoff).
 #[derive(Debug, thiserror::Error)]

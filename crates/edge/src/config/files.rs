@@ -12,6 +12,10 @@ pub fn check(cfg: &Config) -> Result<(), (String, String)> {
     fn keyed(key: &'static str) -> impl Fn(String) -> (String, String) {
         move |m| (key.to_string(), m)
     }
+    if cfg.source.is_ip_camera() {
+        // Read, never shown: only the file is named.
+        crate::capture::read_login(&cfg.source.credentials_file).map_err(keyed("source.credentials_file"))?;
+    }
     if !cfg.source.is_camera() {
         crate::capture::RecordedSource::open(&cfg.source.path, false, false)
             .map_err(|e| keyed("source.path")(e.to_string()))?;

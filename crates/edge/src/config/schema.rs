@@ -9,7 +9,7 @@
 use serde::{Deserialize, Serialize};
 
 pub use super::stages::CameraConfig;
-pub use crate::capture::config::{CameraFormat, SourceConfig};
+pub use crate::capture::config::{CameraFormat, RtspTransport, SourceConfig, SourceKind};
 pub use crate::console::config::ConsoleConfig;
 pub use crate::history::config::HistoryConfig;
 pub use crate::output::config::{

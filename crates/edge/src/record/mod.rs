@@ -298,7 +298,7 @@ impl Recorder {
             retry: crate::backoff::Backoff::new(RETRY_MIN, RETRY_MAX),
             last_error_log: None,
             jpeg: Vec::new(),
-            source: cfg.source.path.clone(),
+            source: cfg.source.name(),
         };
         let sh = shared.clone();
         let (rc2, on) = (rc.clone(), ring_on.clone());
