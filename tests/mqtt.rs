@@ -314,11 +314,15 @@ fn check_event(v: &Value, box_id: &str) -> Result<(), String> {
 
 /// The `config` schema of docs/mqtt.md.
 fn check_config(v: &Value, box_id: &str) -> Result<(), String> {
-    if keys(v) != ["box_id", "config", "version"] {
+    if keys(v) != ["box_id", "build", "config", "depth_form", "detector_form", "version"] {
         return Err(format!("keys {:?}", keys(v)));
     }
     if v["box_id"] != box_id || !v["version"].is_string() {
         return Err("box_id or version".into());
+    }
+    // The bundled int8 pair the default configuration names, run by ONNX Runtime.
+    if v["build"] != fme::infer::backend::BUILD || v["detector_form"] != "int8-qdq" || v["depth_form"] != "int8-qdq" {
+        return Err("build, detector_form or depth_form".into());
     }
     let c: Config = serde_json::from_value(v["config"].clone()).map_err(|e| format!("config: {e}"))?;
     if !c.output.mqtt.enabled {
