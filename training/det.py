@@ -69,10 +69,16 @@ class FishDet(nn.Module):
         self.s8 = nn.Sequential(conv(w[1], w[2], 2), *[Block(w[2], "s8" in sep) for _ in range(s8_blocks)])
         self.s16 = nn.Sequential(conv(w[2], w[3], 2), Block(w[3], "s16" in sep), Block(w[3], "s16" in sep))
         self.s32 = nn.Sequential(conv(w[3], w[4], 2), Block(w[4], "s32" in sep))
-        self.l32 = conv(w[4], fpn, k=1)
-        self.l16 = conv(w[3], fpn, k=1)
-        self.l8 = conv(w[2], fpn, k=1)
-        self.l4 = conv(w[1], head, k=1)
+        self.add_neck((w[1], w[2], w[3], w[4]), fpn, head, sub, head_conv, sep)
+
+    def add_neck(self, chans, fpn, head, sub, head_conv, sep):
+        """The top-down FPN (stride 32 -> 16 -> 8 -> 4) and the head on backbone taps of `chans`
+        channels at strides 4, 8, 16, 32."""
+        c4, c8, c16, c32 = chans
+        self.l32 = conv(c32, fpn, k=1)
+        self.l16 = conv(c16, fpn, k=1)
+        self.l8 = conv(c8, fpn, k=1)
+        self.l4 = conv(c4, head, k=1)
         self.m16 = conv3(fpn, fpn, "m16" in sep)
         self.m8 = conv3(fpn, fpn, "m8" in sep)
         self.r4 = conv(fpn, head, k=1)
@@ -88,7 +94,10 @@ class FishDet(nn.Module):
         c4 = self.s4(self.stem(x))
         c8 = self.s8(c4)
         c16 = self.s16(c8)
-        c32 = self.s32(c16)
+        return self.top_down(c4, c8, c16, self.s32(c16))
+
+    def top_down(self, c4, c8, c16, c32):
+        """The neck on the backbone's taps: the head's activation before its last 1x1 convolution."""
         p16 = self.m16(self.l16(c16) + F.interpolate(self.l32(c32), scale_factor=2.0, mode="nearest"))
         p8 = self.m8(self.l8(c8) + F.interpolate(p16, scale_factor=2.0, mode="nearest"))
         p4 = self.m4(self.l4(c4) + F.interpolate(self.r4(p8), scale_factor=2.0, mode="nearest"))
@@ -248,19 +257,7 @@ class MNV2Det(FishDet):
         self.body = MobileNetV2Body(pad)
         if weights:
             load_body(self.body, torch.load(weights, map_location="cpu")["state_dict"])
-        c4, c8, c16, c32 = MobileNetV2Body.CHANNELS
-        self.l32 = conv(c32, fpn, k=1)
-        self.l16 = conv(c16, fpn, k=1)
-        self.l8 = conv(c8, fpn, k=1)
-        self.l4 = conv(c4, head, k=1)
-        self.m16 = conv3(fpn, fpn, "m16" in sep)
-        self.m8 = conv3(fpn, fpn, "m8" in sep)
-        self.r4 = conv(fpn, head, k=1)
-        self.m4 = conv3(head, head, "m4" in sep)
-        self.h = conv3(head, head, "h" in sep) if head_conv else nn.Identity()
-        self.out = nn.Conv2d(head, 5 * sub * sub, 1)
-        nn.init.constant_(self.out.bias[0:sub * sub], -4.6)  # score prior 0.01
-        self.export_decode = False
+        self.add_neck(MobileNetV2Body.CHANNELS, fpn, head, sub, head_conv, sep)
 
     def train(self, mode=True):
         super().train(mode)
@@ -270,11 +267,7 @@ class MNV2Det(FishDet):
         return self
 
     def features(self, x):
-        c4, c8, c16, c32 = self.body(x * 2.0 - 1.0)
-        p16 = self.m16(self.l16(c16) + F.interpolate(self.l32(c32), scale_factor=2.0, mode="nearest"))
-        p8 = self.m8(self.l8(c8) + F.interpolate(p16, scale_factor=2.0, mode="nearest"))
-        p4 = self.m4(self.l4(c4) + F.interpolate(self.r4(p8), scale_factor=2.0, mode="nearest"))
-        return self.h(p4)
+        return self.top_down(*self.body(x * 2.0 - 1.0))
 
 
 # Layouts with a pretrained body (train_real.py --arch): kept apart from ARCHS, whose layouts
