@@ -15,6 +15,7 @@ use fme::service::{Daemon, RunOptions};
 use servers::{GstServer, SilentListener};
 use std::path::Path;
 use std::time::{Duration, Instant};
+use support::wait_until;
 
 const SEQ: &str = "tests/data/swarm20";
 
@@ -75,14 +76,6 @@ fn rtsp_stream_gives_the_recordings_frames_times_and_activity() {
     eprintln!("stream mean {mx:.4} m/s, recording mean {my:.4} m/s, DistCorr {dc:.3}");
     assert!((mx - my).abs() <= 0.03 * my, "means: stream {mx:.4} vs recording {my:.4} m/s");
     assert!(dc >= 0.95, "DistCorr {dc:.3}");
-}
-
-async fn wait_until(what: &str, secs: u64, mut f: impl FnMut() -> bool) {
-    let end = tokio::time::Instant::now() + Duration::from_secs(secs);
-    while !f() {
-        assert!(tokio::time::Instant::now() < end, "timed out waiting for {what}");
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

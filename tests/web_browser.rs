@@ -5,28 +5,18 @@
 //! page at phone (390 px) and desktop (1280 px) width are written under `target/web-screenshots/`
 //! (docs/web.md has what each must show).
 
+#[path = "daemon/support.rs"]
+mod support;
+
 use fantoccini::{Client, ClientBuilder};
 use serde_json::{Value, json};
 use std::collections::HashMap;
 use std::io::{Read as _, Write as _};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-/// A child process killed when the test ends, however it ends.
-struct Running(Child);
-
-impl Drop for Running {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("free port")
-}
+use support::{Running, free_port};
 
 /// The program `name` on the PATH (or in /usr/bin, /usr/lib/chromium), or a failure saying how to get it.
 fn program(name: &str) -> PathBuf {

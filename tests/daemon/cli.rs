@@ -2,7 +2,7 @@
 //! recording is a clear error; an absent camera is reported and retried (the daemon keeps running);
 //! SIGTERM stops it within 2 s.
 
-use crate::support;
+use crate::support::{self, free_port};
 
 use std::io::Read;
 use std::process::{Command, Stdio};
@@ -215,11 +215,6 @@ fn version_names_the_backend() {
         text.trim(),
         format!("fme {} (backend onnxruntime, default models int8-qdq)", env!("CARGO_PKG_VERSION"))
     );
-}
-
-/// A free local port (bound, then released) for a daemon the test talks to.
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("free port")
 }
 
 /// One FC04 read of the heartbeat (register 12) over raw Modbus TCP; `None` if not served.

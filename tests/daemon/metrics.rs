@@ -6,7 +6,7 @@
 //! are refused, and the daemon keeps serving throughout. A port already taken is logged and shown,
 //! and the daemon runs on.
 
-use crate::support;
+use crate::support::{self, Running, free_port};
 
 use fme::capture::{FrameSource, RecordedSource};
 use fme::service::{Daemon, RunOptions};
@@ -14,24 +14,10 @@ use openmetrics_parser::{MetricFamily, PrometheusType, PrometheusValue};
 use std::collections::HashMap;
 use std::io::{Read as _, Write as _};
 use std::net::TcpStream;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 type Families = HashMap<String, MetricFamily<PrometheusType, PrometheusValue>>;
-
-/// Kills the daemon if the test fails half-way.
-struct Running(Child);
-
-impl Drop for Running {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("free port")
-}
 
 /// One request on a fresh connection: (status code, head, body). A closed or reset connection
 /// before any answer is `Err`.

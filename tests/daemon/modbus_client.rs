@@ -1,7 +1,7 @@
 //! Client roles: the daemon writes its block into an in-process PLC simulator (one FC16 per update);
 //! PLC down at start, dropping mid-run and back: the daemon keeps running and catches up.
 
-use crate::support;
+use crate::support::{self, wait_until};
 
 use fme::capture::{Backoff, FrameSource, RecordedSource};
 use fme::config::{ModbusMode, WordOrder};
@@ -78,14 +78,6 @@ async fn serve_plc(plc: Plc, addr: SocketAddr) -> tokio::sync::oneshot::Sender<(
 fn free_port() -> SocketAddr {
     let l = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
     l.local_addr().expect("addr")
-}
-
-async fn wait_until(what: &str, secs: u64, mut f: impl FnMut() -> bool) {
-    let end = tokio::time::Instant::now() + Duration::from_secs(secs);
-    while !f() {
-        assert!(tokio::time::Instant::now() < end, "timed out waiting for {what}");
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
