@@ -12,6 +12,8 @@
 //!
 //! Mosquitto comes from Debian's package (`make setup`); without it these tests fail, naming it.
 
+#[path = "mqtt/broker.rs"]
+mod broker;
 #[path = "mqtt/delay_proxy.rs"]
 mod delay_proxy;
 #[path = "mqtt/slow_link.rs"]
@@ -21,6 +23,7 @@ mod support;
 #[path = "mqtt/tls.rs"]
 mod tls;
 
+use broker::{Broker, Msg, Sub, free_port, mosquitto_program};
 use delay_proxy::DelayProxy;
 use fme::backoff::Backoff;
 use fme::capture::{FrameSource, RecordedSource};
@@ -30,156 +33,12 @@ use fme::output::{StatusBits, Update};
 use fme::pipeline::ScaleSource;
 use fme::service::{Daemon, RunOptions};
 use fme::status::{MqttLink, Shared};
-use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::{Arc, Mutex};
+use std::process::{Command, Stdio};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio_modbus::prelude::*;
-
-/// A program of the mosquitto package: on PATH, else where Debian puts it (/usr/sbin is not on a
-/// non-root PATH).
-fn mosquitto_program(name: &str) -> PathBuf {
-    let path = std::env::var_os("PATH").unwrap_or_default();
-    std::env::split_paths(&path)
-        .map(|d| d.join(name))
-        .chain(["/usr/sbin", "/usr/bin", "/usr/local/sbin", "/usr/local/bin"].map(|d| Path::new(d).join(name)))
-        .find(|p| p.is_file())
-        .unwrap_or_else(|| {
-            panic!("`{name}` not found on PATH or in /usr/sbin: run `make setup` (it installs Debian's mosquitto)")
-        })
-}
-
-fn free_port() -> u16 {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").expect("bind an ephemeral port");
-    l.local_addr().expect("local addr").port()
-}
-
-/// A Mosquitto of this test: its own port, config file and directory; killed on drop.
-struct Broker {
-    child: Option<Child>,
-    conf: PathBuf,
-    port: u16,
-    dir: tempfile::TempDir,
-}
-
-impl Broker {
-    /// Starts a broker on a free loopback port; `extra` is appended to its config file (it may
-    /// refer to `{dir}`, the broker's directory).
-    fn start(extra: &str) -> Self {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let port = free_port();
-        let conf = dir.path().join("mosquitto.conf");
-        // `user root` only matters when the tests run as root (CI): mosquitto then stays root
-        // instead of switching to the `mosquitto` user, which could not read the temp dir.
-        let text = format!(
-            "listener {port} 127.0.0.1\nallow_anonymous true\nuser root\n{}\n",
-            extra.replace("{dir}", &dir.path().to_string_lossy())
-        );
-        std::fs::write(&conf, text).expect("write mosquitto.conf");
-        let mut b = Self { child: None, conf, port, dir };
-        b.restart();
-        b
-    }
-
-    /// Starts the broker again on the same port with the same config.
-    fn restart(&mut self) {
-        let log = std::fs::File::create(self.dir.path().join("mosquitto.log")).expect("log file");
-        let child = Command::new(mosquitto_program("mosquitto"))
-            .arg("-c")
-            .arg(&self.conf)
-            .stdout(Stdio::null())
-            .stderr(log)
-            .spawn()
-            .expect("start mosquitto");
-        self.child = Some(child);
-        let end = Instant::now() + Duration::from_secs(10);
-        while std::net::TcpStream::connect(("127.0.0.1", self.port)).is_err() {
-            assert!(Instant::now() < end, "mosquitto did not listen on {} within 10 s: {}", self.port, self.log());
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-
-    /// Stops the broker with SIGTERM (it saves its persistence file) and waits for it.
-    fn stop(&mut self) {
-        if let Some(mut c) = self.child.take() {
-            // SAFETY: kill(2) on the pid of our own child.
-            unsafe { libc::kill(c.id() as i32, libc::SIGTERM) };
-            let _ = c.wait();
-        }
-    }
-
-    fn log(&self) -> String {
-        std::fs::read_to_string(self.dir.path().join("mosquitto.log")).unwrap_or_default()
-    }
-}
-
-impl Drop for Broker {
-    fn drop(&mut self) {
-        if let Some(mut c) = self.child.take() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
-/// One received message.
-#[derive(Debug, Clone)]
-struct Msg {
-    topic: String,
-    payload: String,
-    retain: bool,
-}
-
-/// A subscriber on `filter`, reconnecting every 100 ms while the broker is away.
-struct Sub {
-    msgs: Arc<Mutex<Vec<Msg>>>,
-    task: tokio::task::JoinHandle<()>,
-}
-
-impl Sub {
-    fn start(port: u16, id: &str, filter: &str, clean: bool) -> Self {
-        let mut o = MqttOptions::new(id, "127.0.0.1", port);
-        o.set_clean_session(clean);
-        o.set_keep_alive(Duration::from_secs(5));
-        o.set_max_packet_size(1 << 20, 1 << 20);
-        let (client, mut el) = AsyncClient::new(o, 16);
-        let msgs = Arc::new(Mutex::new(Vec::new()));
-        let (m, filter) = (msgs.clone(), filter.to_string());
-        let task = tokio::spawn(async move {
-            loop {
-                match el.poll().await {
-                    Ok(Event::Incoming(Packet::ConnAck(_))) => {
-                        let _ = client.try_subscribe(filter.clone(), QoS::AtLeastOnce);
-                    }
-                    Ok(Event::Incoming(Packet::Publish(p))) => m.lock().expect("lock").push(Msg {
-                        topic: p.topic.clone(),
-                        payload: String::from_utf8_lossy(&p.payload).into_owned(),
-                        retain: p.retain,
-                    }),
-                    Ok(_) => {}
-                    Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
-                }
-            }
-        });
-        Self { msgs, task }
-    }
-
-    fn all(&self) -> Vec<Msg> {
-        self.msgs.lock().expect("lock").clone()
-    }
-
-    fn on(&self, topic: &str) -> Vec<Msg> {
-        self.all().into_iter().filter(|m| m.topic == topic).collect()
-    }
-}
-
-impl Drop for Sub {
-    fn drop(&mut self) {
-        self.task.abort();
-    }
-}
 
 /// Waits up to `limit` for `cond`; returns whether it became true.
 async fn wait_for(limit: Duration, mut cond: impl FnMut() -> bool) -> bool {

@@ -1,7 +1,13 @@
 //! IP cameras against real servers on loopback: GStreamer's RTSP server (tests/rtsp_server.py)
-//! serving the bundled recording as H.264, a listener that never answers, a fake RTSP server that
-//! refuses the login, and an MJPEG-over-HTTP camera written here.
+//! serving the bundled recording as H.264 (with or without a Basic or Digest login, or answering and
+//! then sending no picture), a listener that never answers, a fake RTSP server that refuses the
+//! login, and an MJPEG-over-HTTP camera written here; `fme run` through a server outage
+//! (rtsp/daemon_outage.rs).
 
+#[path = "mqtt/broker.rs"]
+mod broker;
+#[path = "rtsp/daemon_outage.rs"]
+mod daemon_outage;
 #[path = "rtsp/servers.rs"]
 mod servers;
 #[path = "daemon/support.rs"]
@@ -138,6 +144,59 @@ fn wrong_path_silent_server_wrong_login_and_h265_are_clear_errors() {
     let cfg = SourceConfig { credentials_file: creds, ..rtsp_source(&refusing.url(), 2000) };
     let e = open_err(&mut RtspSource::new(cfg).expect("source"));
     assert!(e.contains("401") && e.contains("credentials_file") && !e.contains("hunter2"), "{e}");
+}
+
+#[test]
+fn real_server_basic_and_digest_logins_and_a_wrong_one_named_without_its_password() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let login = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).expect("write");
+        p
+    };
+    let (right, wrong) = (login("right", "viewer:s3cret\n"), login("wrong", "admin:hunter2\n"));
+    for method in ["basic", "digest"] {
+        let server = GstServer::start_with(0, &["--auth", method, "--login", "viewer:s3cret"]);
+        let cfg = |creds: &Path| SourceConfig {
+            credentials_file: creds.to_path_buf(),
+            ..rtsp_source(&server.url("/h264"), 5000)
+        };
+        let e = open_err(&mut RtspSource::new(cfg(&wrong)).expect("source"));
+        let named = e.contains("401") && e.contains("\"admin\"") && e.contains("source.credentials_file");
+        assert!(named && !e.contains("hunter2"), "{method}: {e}");
+        let e = open_err(&mut RtspSource::new(cfg(Path::new(""))).expect("source"));
+        assert!(e.contains("asks for a login") && e.contains("source.credentials_file"), "{method}: {e}");
+        let mut src = RtspSource::new(cfg(&right)).expect("source");
+        src.reopen().unwrap_or_else(|e| panic!("{method} login refused: {e}"));
+        let f = src.next_frame(Vec::new()).unwrap_or_else(|e| panic!("{method}: no picture: {e}"));
+        assert_eq!((f.width, f.height, f.format), (640, 384, PixelFormat::I420), "{method}");
+    }
+}
+
+/// A server that answers DESCRIBE, SETUP and PLAY and then sends no picture: a camera fault after
+/// `source.timeout_ms`, tried again with backoff, without a busy loop.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stream_without_pictures_is_a_camera_fault_not_a_hang() {
+    let server = GstServer::start(0);
+    let mut cfg = support::test_config(Path::new(SEQ));
+    cfg.source =
+        SourceConfig { reconnect_min_ms: 200, reconnect_max_ms: 800, ..rtsp_source(&server.url("/stall"), 500) };
+    let mut src = RtspSource::new(cfg.source.clone()).expect("source");
+    src.reopen().expect("the server answers DESCRIBE, SETUP and PLAY");
+    let pipeline = support::edge_pipeline(&cfg);
+    let daemon =
+        Daemon::start(cfg, String::new(), Box::new(src), pipeline, RunOptions::default()).await.expect("start");
+    let (shared, bank) = (daemon.shared().clone(), daemon.bank().clone());
+    wait_until("the camera fault", 15, || bank.block()[11] == FaultCode::Camera as u16).await;
+    let cpu0 = process_cpu_s();
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let cpu = process_cpu_s() - cpu0;
+    let h = shared.health();
+    assert_eq!(bank.block()[11], FaultCode::Camera as u16);
+    daemon.shutdown().await;
+    assert_eq!(h.frames_captured, 0);
+    assert!(h.capture_errors >= 1 && h.reconnects >= 1, "{} errors, {} reconnects", h.capture_errors, h.reconnects);
+    assert!(cpu < 0.5, "{cpu:.2} s of CPU in 3 s while the camera sends nothing");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

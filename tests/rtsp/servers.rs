@@ -11,7 +11,8 @@ use std::time::Duration;
 /// Debian's Python, where `python3-gi` installs (a pyenv `python3` earlier on PATH lacks it).
 const PYTHON: &str = "/usr/bin/python3";
 
-/// tests/rtsp_server.py: the bundled recording as H.264 on `/h264` (and H.265 on `/h265`).
+/// tests/rtsp_server.py: the bundled recording as H.264 on `/h264` (and H.265 on `/h265`), and
+/// `/stall`, which answers but sends no picture.
 pub struct GstServer {
     child: Child,
     pub port: u16,
@@ -21,6 +22,11 @@ pub struct GstServer {
 impl GstServer {
     /// Starts the server on `port` (0: a free one) and waits until it listens.
     pub fn start(port: u16) -> Self {
+        Self::start_with(port, &[])
+    }
+
+    /// [`GstServer::start`] with more options of tests/rtsp_server.py (`--auth digest --login u:p`).
+    pub fn start_with(port: u16, options: &[&str]) -> Self {
         let probe = "import gi; gi.require_version('GstRtspServer', '1.0'); \
                      from gi.repository import Gst, GstRtspServer; Gst.init(None); \
                      assert Gst.ElementFactory.find('x264enc'); \
@@ -35,6 +41,7 @@ impl GstServer {
         let has_h265 = String::from_utf8_lossy(&out.stdout).contains("h265");
         let mut child = Command::new(PYTHON)
             .args(["tests/rtsp_server.py", "tests/data/swarm20/img1", "30", &port.to_string()])
+            .args(options)
             .stdout(Stdio::piped())
             .spawn()
             .expect("start tests/rtsp_server.py");

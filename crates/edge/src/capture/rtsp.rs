@@ -101,18 +101,21 @@ impl RtspSource {
 
     async fn connect(cfg: &SourceConfig) -> Result<Demuxed, String> {
         let url = url::Url::parse(&cfg.url).map_err(|e| format!("source.url: {e}"))?;
-        let creds = read_login(&cfg.credentials_file)?.map(|l| Credentials { username: l.user, password: l.password });
+        let login = read_login(&cfg.credentials_file)?;
+        let user = login.as_ref().map(|l| l.user.clone());
+        let err = |e: retina::Error| login_error(&e, user.as_deref());
+        let creds = login.map(|l| Credentials { username: l.user, password: l.password });
         let opts = SessionOptions::default().creds(creds).user_agent("fme".into());
-        let mut session = Session::describe(url, opts).await.map_err(|e| rtsp_error(&e))?;
+        let mut session = Session::describe(url, opts).await.map_err(err)?;
         let stream = pick_h264(session.streams())?;
         let transport = match cfg.transport {
             RtspTransport::Tcp => Transport::Tcp(Default::default()),
             RtspTransport::Udp => Transport::Udp(Default::default()),
         };
         let setup = SetupOptions::default().transport(transport).frame_format(FrameFormat::SIMPLE);
-        session.setup(stream, setup).await.map_err(|e| rtsp_error(&e))?;
-        let playing = session.play(PlayOptions::default()).await.map_err(|e| rtsp_error(&e))?;
-        playing.demuxed().map_err(|e| rtsp_error(&e))
+        session.setup(stream, setup).await.map_err(err)?;
+        let playing = session.play(PlayOptions::default()).await.map_err(err)?;
+        playing.demuxed().map_err(err)
     }
 
     /// Decodes one access unit; `Some` when it completed a picture, written into `buf` as I420.
@@ -151,6 +154,25 @@ fn pick_h264(streams: &[retina::client::Stream]) -> Result<usize, String> {
             s.encoding_name().to_ascii_uppercase()
         )),
         None => Err("the camera's stream has no video".into()),
+    }
+}
+
+/// [`rtsp_error`], with a refused login named by its user (never its password): a camera with
+/// several accounts is fixed by knowing which one was tried.
+fn login_error(e: &retina::Error, user: Option<&str>) -> String {
+    if e.status_code() != Some(401) {
+        return rtsp_error(e);
+    }
+    let first = e.to_string().lines().next().unwrap_or_default().to_string();
+    match user {
+        Some(u) => format!(
+            "the camera refused the login of user {u:?} (401 Unauthorized): check the user and password in \
+             source.credentials_file ({first})"
+        ),
+        None => format!(
+            "the camera asks for a login (401 Unauthorized) and none is set: put user:password in a file \
+             named by source.credentials_file ({first})"
+        ),
     }
 }
 

@@ -108,6 +108,11 @@ fn capture_loop(
                 window_frames += 1;
                 let elapsed = now.saturating_duration_since(window_start).as_secs_f64();
                 shared.with_health(|h| {
+                    // A camera back after an outage restarts the stall clock: the frames not
+                    // processed while it was away are no pipeline stall.
+                    if !h.camera_ok {
+                        h.last_processed_at = Some(now);
+                    }
                     h.camera_ok = true;
                     h.frames_captured += 1;
                     h.frames_dropped = dropped;
