@@ -7,6 +7,7 @@
 //! counting allocator is process-wide) and `daemon_watchdog` (it sets the process's systemd variables).
 
 mod bad_frames;
+mod camera_back;
 mod cli;
 mod console_pty;
 mod console_socat;
