@@ -14,8 +14,9 @@ function calibrate() {
     if (!img.naturalWidth) return;
     canvas.width = img.naturalWidth; canvas.height = img.naturalHeight;
     const g = canvas.getContext("2d");
-    const s = Math.max(1, img.naturalWidth / 640);
-    g.lineWidth = 2 * s; g.font = (13 * s) + "px system-ui, sans-serif";
+    // Marks and labels of one size on the screen, whatever the picture is scaled to.
+    const s = img.naturalWidth / (canvas.clientWidth || img.naturalWidth);
+    g.lineWidth = 2 * s; g.font = ((canvas.clientWidth < 500 ? 11 : 13) * s) + "px system-ui, sans-serif";
     refs.forEach((r, i) => {
       const row = solved && solved.rows ? solved.rows.find((x) => x.name === r.name) : null;
       const bad = solved && solved.bad === r.name;
@@ -145,4 +146,6 @@ function calibrate() {
   $("apply").onclick = () => post(true);
   window.addEventListener("resize", draw);
   list(); inUse();
+  setInterval(inUse, 2000);
 }
+calibrate();
