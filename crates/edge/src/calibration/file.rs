@@ -109,9 +109,57 @@ impl CalibrationFile {
         let renamed = checked.and_then(|()| {
             std::fs::rename(&tmp, path).map_err(|e| format!("renaming {} to {}: {e}", tmp.display(), path.display()))
         });
-        if renamed.is_err() {
-            let _ = std::fs::remove_file(&tmp);
+        match &renamed {
+            // The rename itself reaches the disk with the folder (a power cut after the answer
+            // keeps the new file).
+            Ok(()) => {
+                if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+                    let _ = std::fs::File::open(dir).and_then(|d| d.sync_all());
+                }
+            }
+            Err(_) => {
+                let _ = std::fs::remove_file(&tmp);
+            }
         }
         renamed
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fme_core::calib;
+
+    #[test]
+    fn written_atomically_and_read_back_by_the_loader() {
+        let truth = super::super::load(&Path::new(fme_core::REPO_DIR).join("tests/data/swarm20/meta.json"))
+            .expect("the bundled calibration");
+        let refs: Vec<Reference> = truth
+            .references
+            .iter()
+            .enumerate()
+            .map(|(i, w)| Reference {
+                name: format!("c{i}"),
+                line: 0,
+                world: *w,
+                pixel: truth.camera.world_to_pixel(w).expect("in view"),
+            })
+            .collect();
+        let opts = Options { max_rms_px: 3.0, click_px: 1.5, tape_m: 0.01, width: 640, height: 384 };
+        let sol = calib::calibrate(&refs, Some(&truth.camera.intrinsics), &opts).expect("solves");
+        let file = CalibrationFile::new(&refs, &sol, &opts, 0.1, ("f".into(), "p".into()));
+        let dir = std::env::temp_dir().join(format!("fme-calib-file-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let path = dir.join("calib.json");
+        file.write_atomic(&path).expect("written");
+        let back = super::super::load(&path).expect("loads");
+        assert_eq!(back.references.len(), 10);
+        assert!(back.camera.pose.camera_center().distance(&truth.camera.pose.camera_center()).get() < 1e-6);
+        // A folder that does not exist: an error naming it, nothing left behind.
+        let e = file.write_atomic(&dir.join("missing/calib.json")).unwrap_err();
+        assert!(e.contains("missing"), "{e}");
+        let left: Vec<_> = std::fs::read_dir(&dir).expect("list").flatten().map(|e| e.file_name()).collect();
+        assert_eq!(left, vec![std::ffi::OsString::from("calib.json")], "no temporary file left");
+        std::fs::remove_dir_all(&dir).expect("clean up");
     }
 }

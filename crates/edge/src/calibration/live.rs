@@ -132,4 +132,32 @@ mod tests {
         slot.took(None);
         assert_eq!(slot.taken(), 1);
     }
+
+    /// A pipeline that cannot take a calibration (the trait's default).
+    struct Fixed;
+
+    impl fme_core::pipeline::Pipeline for Fixed {
+        fn process(
+            &mut self,
+            _frame: &fme_core::pipeline::Frame,
+        ) -> Result<fme_core::pipeline::FrameOutcome<'_>, fme_core::pipeline::PipelineError> {
+            Err(fme_core::pipeline::PipelineError::Stage { stage: "test", message: "none".into() })
+        }
+        fn health(&self) -> fme_core::pipeline::StageHealth {
+            fme_core::pipeline::StageHealth::default()
+        }
+    }
+
+    #[test]
+    fn a_refused_calibration_is_logged_and_the_one_in_use_kept() {
+        let shared = Shared::new(String::new(), 50);
+        let path = std::path::Path::new(fme_core::REPO_DIR).join("tests/data/swarm20/meta.json");
+        let c = crate::calibration::load(&path).expect("the bundled calibration");
+        shared.calibration.offer(Some(c));
+        apply_pending(&shared, &mut Fixed);
+        assert!(shared.calibration.in_use().is_none(), "the pipeline refused it");
+        assert_eq!(shared.calibration.taken(), 0);
+        let log = shared.last_logs(10).join("\n");
+        assert!(log.contains("refused by the pipeline") && log.contains("meta.json"), "{log}");
+    }
 }
