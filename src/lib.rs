@@ -4,9 +4,10 @@
 //! integration tests and benchmarks name every module as `fme::<module>`:
 //!
 //! - `fme-core`: the pure pipeline (units, geometry, infer, track, metric, postprocess, motion,
-//!   familiarity, pipeline);
+//!   familiarity, pipeline, the calibration solver);
 //! - `fme-edge`: the configuration file, capture, outputs, console, history, black box, daemon;
-//! - `fme-lab`: synthetic data, scoring, the calibration solver, the tracker's tuning.
+//! - `fme-lab`: synthetic data, scoring, the tracker's tuning (`fme::calib` and `fme::rng` come
+//!   through it from `fme-core`).
 //!
 //! The layers and their rules: docs/pipeline.md#layers.
 

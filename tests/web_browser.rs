@@ -5,28 +5,21 @@
 //! page at phone (390 px) and desktop (1280 px) width are written under `target/web-screenshots/`
 //! (docs/web.md has what each must show).
 
+#[path = "common/browser.rs"]
+mod browser;
 #[path = "daemon/support.rs"]
 mod support;
 
-use fantoccini::{Client, ClientBuilder};
-use serde_json::{Value, json};
+use browser::start_browser;
+use fantoccini::Client;
+use serde_json::json;
 use std::collections::HashMap;
 use std::io::{Read as _, Write as _};
 use std::net::TcpStream;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 use support::{Running, free_port};
-
-/// The program `name` on the PATH (or in /usr/bin, /usr/lib/chromium), or a failure saying how to get it.
-fn program(name: &str) -> PathBuf {
-    let dirs = std::env::var("PATH").unwrap_or_default();
-    std::env::split_paths(&dirs)
-        .chain([PathBuf::from("/usr/bin"), PathBuf::from("/usr/lib/chromium")])
-        .map(|d| d.join(name))
-        .find(|p| p.is_file())
-        .unwrap_or_else(|| panic!("{name} not found: `make setup` installs Debian's chromium and chromium-driver"))
-}
 
 /// Input registers 0-23 over Modbus TCP, or `None`.
 fn registers(port: u16) -> Option<[u16; 24]> {
@@ -71,48 +64,6 @@ fn start_fme(dir: &Path, web: u16, modbus: u16) -> Running {
         .spawn()
         .expect("spawn fme run");
     Running(child)
-}
-
-async fn start_browser(dir: &Path) -> (Running, Client) {
-    let chromium = program("chromium");
-    let port = free_port();
-    let driver = Command::new(program("chromedriver"))
-        .arg(format!("--port={port}"))
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("spawn chromedriver");
-    let driver = Running(driver);
-    let profile = dir.join("chromium-profile");
-    let args = [
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-quic",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        "--disable-dev-shm-usage",
-        "--hide-scrollbars",
-    ];
-    let mut args: Vec<String> = args.iter().map(|a| a.to_string()).collect();
-    args.push(format!("--user-data-dir={}", profile.display()));
-    let caps = json!({ "goog:chromeOptions": { "binary": chromium, "args": args } });
-    let Value::Object(caps) = caps else { unreachable!("an object") };
-    let deadline = Instant::now() + Duration::from_secs(20);
-    loop {
-        let connector = hyper_util::client::legacy::connect::HttpConnector::new();
-        match ClientBuilder::new(connector)
-            .capabilities(caps.clone())
-            .connect(&format!("http://127.0.0.1:{port}"))
-            .await
-        {
-            Ok(c) => return (driver, c),
-            Err(e) => assert!(Instant::now() < deadline, "chromedriver on port {port}: {e}"),
-        }
-        tokio::time::sleep(Duration::from_millis(200)).await;
-    }
 }
 
 /// The live page's (heartbeat, activity value, shown text), once it has shown an update.

@@ -4,8 +4,8 @@
 
 use super::{UsageError, write_stdout};
 use crate::calib::{self, Options, Reference, Residual};
+use crate::calibration::file::CalibrationFile;
 use crate::geometry::Intrinsics;
-use crate::sequence::{CameraMeta, ReferenceObject};
 use anyhow::Context;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -99,29 +99,6 @@ struct IntrinsicsBlock {
 #[derive(Debug, serde::Deserialize)]
 struct IntrinsicsFile {
     camera: IntrinsicsBlock,
-}
-
-/// What `fme calibrate` writes besides the `camera` block and `reference_objects`.
-#[derive(Debug, serde::Serialize)]
-struct CalibrateInfo {
-    frame: String,
-    points: String,
-    names: Vec<String>,
-    rms_px: f64,
-    max_rms_px: f64,
-    click_px: f64,
-    tape_m: f64,
-    error_px: Vec<f64>,
-    estimated_intrinsics: bool,
-}
-
-#[derive(Debug, serde::Serialize)]
-struct CalibrationOut {
-    width: u32,
-    height: u32,
-    camera: CameraMeta,
-    reference_objects: Vec<ReferenceObject>,
-    calibrate: CalibrateInfo,
 }
 
 fn usage(msg: impl Into<String>) -> anyhow::Error {
@@ -224,47 +201,15 @@ fn calibration_file(
     refs: &[Reference],
     sol: &calib::Solution,
     opts: &Options,
-) -> CalibrationOut {
-    let cam = &sol.camera;
-    let centre = cam.pose.camera_center();
-    let reference_objects = refs
-        .iter()
-        .enumerate()
-        .map(|(i, r)| {
-            let away = (r.world.0 - centre.0).try_normalize(1e-9).unwrap_or_default();
-            let c = r.world.0 + away * (0.5 * args.ref_size);
-            ReferenceObject {
-                id: i as u32 + 1,
-                size_m: args.ref_size,
-                center_w: c.into(),
-                front_face_center_w: r.world.0.into(),
-            }
-        })
-        .collect();
-    CalibrationOut {
-        width: opts.width,
-        height: opts.height,
-        camera: CameraMeta::from_camera(cam),
-        reference_objects,
-        calibrate: CalibrateInfo {
-            frame: args.frame.display().to_string(),
-            points: points.display().to_string(),
-            names: refs.iter().map(|r| r.name.clone()).collect(),
-            rms_px: sol.rms_px,
-            max_rms_px: args.max_rms,
-            click_px: args.click_px,
-            tape_m: args.tape_m,
-            error_px: sol.residuals.iter().map(|r| r.error_px).collect(),
-            estimated_intrinsics: sol.estimated_intrinsics,
-        },
-    }
+) -> CalibrationFile {
+    let from = (args.frame.display().to_string(), points.display().to_string());
+    CalibrationFile::new(refs, sol, opts, args.ref_size, from)
 }
 
 /// Writes the calibration to `out` and reads it back through the loader the daemon uses, so a
 /// file that it would reject is caught here.
-fn write_calibration(out: &Path, file: &CalibrationOut) -> anyhow::Result<()> {
-    let mut text = serde_json::to_string_pretty(file).context("encoding the calibration")?;
-    text.push('\n');
+fn write_calibration(out: &Path, file: &CalibrationFile) -> anyhow::Result<()> {
+    let text = file.to_text().map_err(|e| anyhow::anyhow!(e))?;
     // The path is what the user gave: a missing folder or no permission is a usage error (exit 2).
     std::fs::write(out, text).map_err(|e| usage(format!("--out {}: {e}", out.display())))?;
     crate::calibration::load(out).map_err(|e| anyhow::anyhow!("the written calibration does not load: {e}"))?;

@@ -1,6 +1,6 @@
 //! The daemon's edges in one test binary sharing [`support`]: start-up and the command line,
 //! capture of bad frames, a small, full or stalled disk under the state directory, the serial console over a pseudo-terminal, the whole daemon end to end,
-//! the Modbus roles (in-process PLC peers) and the Prometheus endpoint. The real pipeline has its
+//! the Modbus roles (in-process PLC peers), the Prometheus endpoint and the calibration reload on SIGHUP. The real pipeline has its
 //! own tests (`pipeline_e2e.rs`); the in-process tests here use the frame-difference test double so
 //! they need no models (the `fme run` ones of `cli`, `history` and `metrics` use the real models).
 //! Two daemon tests have binaries of their own, including `support` by path: `daemon_alloc` (its
@@ -18,4 +18,5 @@ mod metrics;
 mod metrics_text;
 mod modbus_client;
 mod modbus_server;
+mod reload;
 mod support;

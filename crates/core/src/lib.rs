@@ -15,17 +15,19 @@
 //! | [`motion`] | world positions, per-fish 3D speed, swarm mean (activity index) | sec. 3.3, eq. 5 |
 //! | [`familiarity`] | "detections look unlike fish": the detector out of its training range | - |
 //! | [`pipeline`] | the stages chained on frame time; what every command runs | eq. 1-5 |
+//! | [`calib`] | camera pose (and intrinsics) from measured reference objects (`fme calibrate`, the web page) | eq. 1-2 |
 //!
 //! Shared low-level pieces with no stage of their own: [`assign`] (the optimal assignment solver of
 //! the tracker and the MOT metrics), [`detection`] (what the detector produces and the tracker
-//! consumes) and [`choice`] (the named options of the config file).
+//! consumes), [`choice`] (the named options of the config file) and [`rng`] (the seeded generator).
 //!
 //! The layers above: `fme-edge` (config file, capture, outputs, daemon), `fme-lab` (synthetic data,
-//! scoring, calibration solver) and the `fme` binary; docs/pipeline.md#layers.
+//! scoring) and the `fme` binary; docs/pipeline.md#layers.
 
 #![warn(missing_docs)]
 
 pub mod assign;
+pub mod calib;
 pub mod choice;
 pub mod detection;
 pub mod familiarity;
@@ -35,6 +37,7 @@ pub mod metric;
 pub mod motion;
 pub mod pipeline;
 pub mod postprocess;
+pub mod rng;
 pub mod track;
 pub mod units;
 

@@ -124,18 +124,7 @@ impl FishPipeline {
         } else {
             None
         };
-        let camera = calibration.as_ref().map_or_else(|| fallback_camera(cfg), |c| c.camera);
-        // References are kept if they fall inside the calibrated image (principal point at its centre);
-        // sampling outside the actual frame returns nothing anyway.
-        let (w, h) = ((2.0 * camera.intrinsics.cx).ceil() as u32, (2.0 * camera.intrinsics.cy).ceil() as u32);
-        let refs = calibration
-            .as_ref()
-            .map(|c| ReferencePoints::project(&camera, c.references.iter().copied(), w, h))
-            .unwrap_or_default();
-        let footprints = match (&calibration, cfg.detector.ignore_references) {
-            (Some(c), true) => ReferenceFootprints::project(&camera, c.cubes.iter().copied()),
-            _ => ReferenceFootprints::default(),
-        };
+        let (camera, refs, footprints) = calibrated_parts(cfg, calibration.as_ref());
         Ok(Self {
             schedule: InferSchedule::new(cfg.detector.rate_hz, cfg.depth.rate_hz),
             detector,
@@ -158,6 +147,17 @@ impl FishPipeline {
             depth_rate: RateMeter::default(),
             cfg: cfg.clone(),
         })
+    }
+
+    /// A new calibration while running (a reload), built as at start: the camera, the reference
+    /// objects' pixels and footprints, the metric fit (started over: its scale belonged to the old
+    /// references) and the speed estimator (its fish were placed with the old camera); tracks stay.
+    fn recalibrate(&mut self, calibration: Option<&Calibration>) {
+        let (camera, refs, footprints) = calibrated_parts(&self.cfg, calibration);
+        self.estimator = ActivityEstimator::new(camera, self.cfg.motion, self.cfg.postprocess);
+        self.scale = ScalePolicy::new(scale_config(&self.cfg), crate::motion::MAX_FISH, refs.len());
+        self.refs = refs;
+        self.footprints = footprints;
     }
 
     /// Takes the first `n` reference objects out of the fit from now on, as if fouled over or out of
@@ -385,6 +385,25 @@ fn fallback_camera(cfg: &PipelineConfig) -> Camera {
     Camera { intrinsics, pose: crate::geometry::Pose::identity() }
 }
 
+/// What a calibration sets up (at start and on a reload): the camera (the assumed lens without
+/// one), the reference objects' pixels and, with `detector.ignore_references`, their footprints.
+fn calibrated_parts(
+    cfg: &PipelineConfig,
+    calibration: Option<&Calibration>,
+) -> (Camera, ReferencePoints, ReferenceFootprints) {
+    let camera = calibration.map_or_else(|| fallback_camera(cfg), |c| c.camera);
+    // References are kept if they fall inside the calibrated image (principal point at its centre);
+    // sampling outside the actual frame returns nothing anyway.
+    let (w, h) = ((2.0 * camera.intrinsics.cx).ceil() as u32, (2.0 * camera.intrinsics.cy).ceil() as u32);
+    let refs =
+        calibration.map(|c| ReferencePoints::project(&camera, c.references.iter().copied(), w, h)).unwrap_or_default();
+    let footprints = match (calibration, cfg.detector.ignore_references) {
+        (Some(c), true) => ReferenceFootprints::project(&camera, c.cubes.iter().copied()),
+        _ => ReferenceFootprints::default(),
+    };
+    (camera, refs, footprints)
+}
+
 impl Pipeline for FishPipeline {
     fn process(&mut self, frame: &Frame) -> Result<FrameOutcome<'_>, PipelineError> {
         let t = frame.timestamp;
@@ -424,6 +443,14 @@ impl Pipeline for FishPipeline {
 
     fn health(&self) -> StageHealth {
         self.health
+    }
+
+    fn set_calibration(&mut self, calibration: Option<&Calibration>) -> Result<(), String> {
+        if let Some(c) = calibration {
+            c.camera.intrinsics.validate().map_err(|e| format!("{}: camera: {e}", c.path.display()))?;
+        }
+        self.recalibrate(calibration);
+        Ok(())
     }
 
     fn networks(&self) -> Networks {

@@ -98,6 +98,11 @@ pub trait Pipeline: Send {
     fn process(&mut self, frame: &Frame) -> Result<FrameOutcome<'_>, PipelineError>;
     /// Current stage health (also after a frame that failed).
     fn health(&self) -> StageHealth;
+    /// Takes a new camera calibration while running (a reload: SIGHUP or the web page's apply),
+    /// set up as at start; `Err` (named problem) keeps the one in use. The default: refused.
+    fn set_calibration(&mut self, _calibration: Option<&Calibration>) -> Result<(), String> {
+        Err("this pipeline cannot take a new calibration while running".into())
+    }
     /// The networks this pipeline runs (the start-up line, the build-info metric). The default: none.
     fn networks(&self) -> Networks {
         Networks::default()

@@ -201,6 +201,8 @@ impl Daemon {
         if let Some(note) = scale_note(&cfg) {
             shared.log(Level::WARN, note);
         }
+        // What the pipeline was built with (read again: the pipeline keeps its own copy).
+        shared.calibration.start(&cfg, cfg.calibration().ok().flatten());
         let publisher = Arc::new(Mutex::new(Publisher::new(&cfg, &timing, bank.clone())));
         // Threads and tasks, in start order; the shutdown stops the tasks first, then the threads.
         let mut parts: Vec<Subsystem> = Vec::new();
@@ -277,19 +279,11 @@ impl Daemon {
         &self.bank
     }
 
-    /// SIGHUP: checks the calibration file again and says what it found (journal and console
-    /// `log`). The running pipeline keeps its calibration: applying a changed one needs a restart.
+    /// SIGHUP: reads the calibration file again and hands a good one to the running pipeline
+    /// ([`crate::calibration::live::reload`]); a bad one is refused, logged, and the calibration in
+    /// use keeps running.
     pub fn on_hangup(&self) {
-        let what = match self.cfg.calibration() {
-            Ok(Some(c)) => format!(
-                "{} reads OK ({} reference objects); restart fme to apply a changed calibration",
-                c.path.display(),
-                c.references.len()
-            ),
-            Ok(None) => "no calibration configured (camera.calibration)".to_string(),
-            Err(e) => format!("{e}; the running calibration is kept"),
-        };
-        self.shared.log(Level::WARN, format!("SIGHUP: not stopping; calibration check: {what}"));
+        let _ = crate::calibration::live::reload(&self.shared, "SIGHUP: not stopping; calibration reload");
     }
 
     /// The bound Modbus TCP server address (useful with port 0).

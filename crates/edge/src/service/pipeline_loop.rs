@@ -57,6 +57,7 @@ pub(super) fn pipeline_loop(mut c: PipelineCtx) {
     };
     while !c.shared.stopping() {
         st.ping_watchdog(c.watchdog);
+        crate::calibration::live::apply_pending(&c.shared, &mut *c.pipeline);
         let Some(frame) = c.queue.pop(Duration::from_millis(100)) else {
             if let Some(r) = c.recorder.as_mut() {
                 r.watch(None, st.errors);

@@ -3,8 +3,9 @@
 //! `kill -USR1` never leaves the PLC reading a frozen block:
 //!
 //! - SIGTERM, SIGINT: a stop that was asked for (exit 0).
-//! - SIGHUP: does not stop fme. The calibration file is checked again and the result logged (journal
-//!   and console `log`); applying a changed calibration needs a restart (`systemctl restart fme`).
+//! - SIGHUP: does not stop fme. The calibration file is read again: a good one is applied to the
+//!   running pipeline, a bad one is refused and the one in use kept; either is logged (journal and
+//!   console `log`).
 //! - SIGXFSZ (a file grew past the file-size limit) is ignored: the write fails with `EFBIG`
 //!   instead, and the recorder pauses like on a full disk (docs/recording.md); the outputs go on.
 //! - SIGQUIT, SIGUSR1, SIGUSR2, SIGALRM, SIGVTALRM, SIGPROF, SIGXCPU, SIGIO, SIGPWR,
@@ -19,7 +20,7 @@ use tokio::sync::mpsc;
 /// What a received signal asks of the daemon.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SignalEvent {
-    /// SIGHUP: re-check the calibration, keep running.
+    /// SIGHUP: reload the calibration, keep running.
     Hangup,
     /// A stop that was asked for (SIGTERM, SIGINT): exit 0.
     Stop(&'static str),

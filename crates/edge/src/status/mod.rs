@@ -385,6 +385,8 @@ pub struct Shared {
     pub modbus: OnceLock<String>,
     /// The latest frame the web page asked for (`/api/latest.jpg`), handed over by the pipeline.
     pub preview: crate::web::preview::Preview,
+    /// The calibration in use and a reload waiting for the pipeline.
+    pub calibration: crate::calibration::live::LiveCalibration,
 }
 
 impl Shared {
@@ -402,6 +404,7 @@ impl Shared {
             word_order: OnceLock::new(),
             modbus: OnceLock::new(),
             preview: crate::web::preview::Preview::default(),
+            calibration: Default::default(),
         }
     }
 

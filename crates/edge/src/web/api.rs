@@ -261,7 +261,7 @@ pub async fn latest_jpg(State(s): State<Arc<WebState>>) -> Response {
     }
 }
 
-fn refused(why: Refusal) -> Response {
+pub(super) fn refused(why: Refusal) -> Response {
     match why {
         Refusal::NoToken => {
             (StatusCode::FORBIDDEN, Json(json!({ "error": "actions are off: set web.token_file (docs/web.md)" })))

@@ -14,6 +14,8 @@
 mod admission;
 pub mod api;
 pub mod auth;
+pub mod calibrate;
+pub mod calibrate_json;
 pub mod config;
 mod conn;
 mod io;

@@ -11,7 +11,7 @@ const HEALTH: &str = include_str!("assets/health.html");
 const STYLE: &str = include_str!("assets/style.css");
 const SCRIPT: &str = include_str!("assets/app.js");
 
-fn typed(body: &'static str, ctype: &'static str) -> Response {
+pub(super) fn typed(body: &'static str, ctype: &'static str) -> Response {
     let mut r = body.into_response();
     r.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(ctype));
     r.headers_mut().insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));

@@ -2,7 +2,7 @@
 //! timeout (408), a body size limit (413) and a limit on requests handled at once over every
 //! connection (more wait their turn, within the timeout).
 
-use super::{MAX_BODY, WebState, api, pages};
+use super::{MAX_BODY, WebState, api, calibrate, pages};
 use crate::output::metrics::{CONTENT_TYPE, Scrape, render};
 use axum::Router;
 use axum::extract::State;
@@ -41,6 +41,10 @@ pub fn web(state: Arc<WebState>) -> Router {
         .route("/", get(pages::live))
         .route("/history", get(pages::history))
         .route("/health", get(pages::health))
+        .route("/calibrate", get(calibrate::page))
+        .route("/assets/calibrate.js", get(calibrate::script))
+        .route("/api/calibration", get(calibrate::get).post(calibrate::post))
+        .route("/api/frame.jpg", get(calibrate::frame_jpg))
         .route("/assets/style.css", get(pages::style))
         .route("/assets/app.js", get(pages::script))
         .route("/metrics", get(metrics).fallback(metrics_method))
@@ -86,7 +90,8 @@ async fn metrics_method() -> Response {
 }
 
 async fn not_found() -> Response {
-    (StatusCode::NOT_FOUND, "not found: the pages are /, /history and /health (docs/web.md)\n").into_response()
+    (StatusCode::NOT_FOUND, "not found: the pages are /, /history, /health and /calibrate (docs/web.md)\n")
+        .into_response()
 }
 
 async fn not_found_metrics() -> Response {

@@ -177,4 +177,5 @@ function health() {
   setInterval(tick, 2000);
 }
 
-({ live, history, health })[document.body.dataset.page]();
+const page = ({ live, history, health })[document.body.dataset.page];
+if (page) page();

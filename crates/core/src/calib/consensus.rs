@@ -49,12 +49,12 @@ pub fn fit_limit(dof: usize) -> f64 {
 }
 
 /// Reference `r`'s pixel covariance under `cam` from the stated noise; `None` behind the camera.
-pub fn pixel_covariance(cam: &fme_core::geometry::Camera, r: &Reference, opts: &Options) -> Option<Matrix2<f64>> {
+pub fn pixel_covariance(cam: &crate::geometry::Camera, r: &Reference, opts: &Options) -> Option<Matrix2<f64>> {
     opts.noise().pixel_covariance(cam, &r.world.0)
 }
 
 /// Marked minus projected pixel; `None` behind the camera.
-fn miss(cam: &fme_core::geometry::Camera, r: &Reference) -> Option<Vector2<f64>> {
+fn miss(cam: &crate::geometry::Camera, r: &Reference) -> Option<Vector2<f64>> {
     let p = cam.world_to_pixel(&r.world).ok()?;
     Some(Vector2::new(r.pixel.u - p.u, r.pixel.v - p.v))
 }
@@ -66,12 +66,7 @@ fn mahalanobis2(e: &Vector2<f64>, s: &Matrix2<f64>) -> f64 {
 
 /// The weighted residual sum `sum_j e_j^T S_j^-1 e_j` of `refs` under `cam` (infinite when one is
 /// behind the camera), and its degrees of freedom (`2n` minus the parameters fitted).
-pub fn fit_chi2(
-    cam: &fme_core::geometry::Camera,
-    refs: &[Reference],
-    estimate_k: bool,
-    opts: &Options,
-) -> (f64, usize) {
+pub fn fit_chi2(cam: &crate::geometry::Camera, refs: &[Reference], estimate_k: bool, opts: &Options) -> (f64, usize) {
     let dof = (2 * refs.len()).saturating_sub(pnp::parameter_count(estimate_k));
     let chi2 = refs
         .iter()
@@ -109,7 +104,7 @@ pub fn consensus(refs: &[Reference], sol: &Solution, opts: &Options) -> Option<C
     for i in 0..refs.len() {
         let others: Vec<Reference> = refs.iter().enumerate().filter(|&(j, _)| j != i).map(|(_, r)| r.clone()).collect();
         let w: Vec<Vector3<f64>> = others.iter().map(|r| r.world.0).collect();
-        let px: Vec<fme_core::geometry::Pixel> = others.iter().map(|r| r.pixel).collect();
+        let px: Vec<crate::geometry::Pixel> = others.iter().map(|r| r.pixel).collect();
         let mut cam = pnp::refine_ml(&sol.camera, &w, &px, est, &opts.noise());
         let (mut chi2, dof) = fit_chi2(&cam, &others, est, opts);
         if chi2.is_nan() || chi2 > fit_limit(dof) {
@@ -153,12 +148,7 @@ pub fn consensus(refs: &[Reference], sol: &Solution, opts: &Options) -> Option<C
 }
 
 /// `sum_j Jt_j^T S_j^-1 Jt_j` over `refs` (the inverse of the parameter covariance).
-fn information(
-    cam: &fme_core::geometry::Camera,
-    refs: &[Reference],
-    est: bool,
-    opts: &Options,
-) -> Option<DMatrix<f64>> {
+fn information(cam: &crate::geometry::Camera, refs: &[Reference], est: bool, opts: &Options) -> Option<DMatrix<f64>> {
     let n = pnp::parameter_count(est);
     let w: Vec<Vector3<f64>> = refs.iter().map(|r| r.world.0).collect();
     let jt = pnp::parameter_jacobian(cam, &w, est)?;

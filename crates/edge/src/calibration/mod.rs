@@ -1,6 +1,10 @@
 //! The calibration file: a `meta.json`-format file (the `camera` block and `reference_objects`,
 //! written by `fme calibrate` or beside a recording) read into the pipeline's
-//! [`Calibration`] (paper eq. 1-2), and which file a configuration asks for.
+//! [`Calibration`] (paper eq. 1-2), and which file a configuration asks for; [`file`] writes it,
+//! [`live`] reloads it into the running pipeline.
+
+pub mod file;
+pub mod live;
 
 use crate::config::Config;
 use crate::sequence::{Meta, ReferenceObject};

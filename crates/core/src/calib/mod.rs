@@ -19,7 +19,7 @@ pub mod pnp;
 
 pub use consensus::consensus;
 
-use fme_core::geometry::{Camera, Intrinsics, Pixel, WorldPoint};
+use crate::geometry::{Camera, Intrinsics, Pixel, WorldPoint};
 use nalgebra::Vector3;
 
 /// Longest reference name accepted in a points CSV, characters (names label tables and overlays).
@@ -300,9 +300,11 @@ fn non_coplanarity(w: &[Vector3<f64>]) -> f64 {
     sv[2] / sv[0].max(1e-12)
 }
 
-/// Solves without the consensus step: linear start(s), then the maximum-likelihood refinement;
-/// of several starts the one with the smallest weighted residual sum is kept.
-fn solve_once(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Options) -> Result<Solution, CalibError> {
+/// Solves without the consensus step and the error limit: linear start(s), then the
+/// maximum-likelihood refinement; of several starts the one with the smallest weighted residual
+/// sum is kept. [`calibrate`] checks it; the web page also shows each reference's error under it
+/// when the check refuses the solve.
+pub fn solve_once(refs: &[Reference], intrinsics: Option<&Intrinsics>, opts: &Options) -> Result<Solution, CalibError> {
     let w: Vec<Vector3<f64>> = refs.iter().map(|r| r.world.0).collect();
     let px: Vec<Pixel> = refs.iter().map(|r| r.pixel).collect();
     let noise = opts.noise();

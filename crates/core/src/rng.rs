@@ -1,6 +1,6 @@
 //! The crate's one random number generator: small and fully specified, so output depends only on
 //! the seed (not on a crate version): SplitMix64 (Steele, Lea & Flood 2014). Synthetic sequences
-//! ([`crate::synth`]) and synthetic detections ([`crate::tune`]) both draw from it.
+//! (`fme_lab::synth`) and synthetic detections (`fme_lab::tune`) both draw from it.
 
 /// SplitMix64 generator.
 #[derive(Debug, Clone)]
@@ -15,7 +15,7 @@ impl Rng {
     }
 
     /// A generator whose internal state starts at `state` exactly (no scrambling of a seed), for
-    /// streams defined that way (the synthetic detections of [`crate::tune`]).
+    /// streams defined that way (the synthetic detections of `fme_lab::tune`).
     pub const fn from_state(state: u64) -> Self {
         Self { state }
     }

@@ -21,7 +21,7 @@
 //!   error on a near reference is several pixels and on a far one a fraction of one, so equal
 //!   pixel weights let the near ones pull the pose.
 
-use fme_core::geometry::{Camera, Intrinsics, Pixel, Pose};
+use crate::geometry::{Camera, Intrinsics, Pixel, Pose};
 use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Matrix3x4, Rotation3, Vector3};
 
 /// Hartley's isotropic normalisation of 2D points: centroid to the origin, mean distance sqrt(2).
@@ -276,7 +276,7 @@ fn residuals(
     out: &mut DVector<f64>,
 ) {
     for (i, (w, m)) in world.iter().zip(px).enumerate() {
-        let (du, dv) = match cam.intrinsics.project(&cam.pose.to_camera(&fme_core::geometry::WorldPoint(*w))) {
+        let (du, dv) = match cam.intrinsics.project(&cam.pose.to_camera(&crate::geometry::WorldPoint(*w))) {
             Ok(p) => (p.u - m.u, p.v - m.v),
             Err(_) => (1e4, 1e4),
         };
@@ -331,7 +331,7 @@ impl Noise {
             .zip(px)
             .map(|(w, m)| {
                 let (Ok(p), Some(s)) =
-                    (cam.world_to_pixel(&fme_core::geometry::WorldPoint(*w)), self.pixel_covariance(cam, w))
+                    (cam.world_to_pixel(&crate::geometry::WorldPoint(*w)), self.pixel_covariance(cam, w))
                 else {
                     return f64::INFINITY;
                 };
@@ -391,8 +391,8 @@ pub fn parameter_jacobian(cam: &Camera, world: &[Vector3<f64>], estimate_k: bool
         d[k] = -h;
         let minus = apply(cam, &d[..np]);
         for (i, w) in world.iter().enumerate() {
-            let p = plus.world_to_pixel(&fme_core::geometry::WorldPoint(*w)).ok()?;
-            let m = minus.world_to_pixel(&fme_core::geometry::WorldPoint(*w)).ok()?;
+            let p = plus.world_to_pixel(&crate::geometry::WorldPoint(*w)).ok()?;
+            let m = minus.world_to_pixel(&crate::geometry::WorldPoint(*w)).ok()?;
             j[(2 * i, k)] = (p.u - m.u) / (2.0 * h);
             j[(2 * i + 1, k)] = (p.v - m.v) / (2.0 * h);
         }
@@ -408,8 +408,8 @@ pub fn world_jacobian(cam: &Camera, world: &Vector3<f64>) -> Option<nalgebra::Ma
     for k in 0..3 {
         let mut d = Vector3::zeros();
         d[k] = h;
-        let p = cam.world_to_pixel(&fme_core::geometry::WorldPoint(world + d)).ok()?;
-        let m = cam.world_to_pixel(&fme_core::geometry::WorldPoint(world - d)).ok()?;
+        let p = cam.world_to_pixel(&crate::geometry::WorldPoint(world + d)).ok()?;
+        let m = cam.world_to_pixel(&crate::geometry::WorldPoint(world - d)).ok()?;
         j[(0, k)] = (p.u - m.u) / (2.0 * h);
         j[(1, k)] = (p.v - m.v) / (2.0 * h);
     }
@@ -495,7 +495,7 @@ pub fn refine_weighted(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fme_core::geometry::WorldPoint;
+    use crate::geometry::WorldPoint;
 
     fn truth() -> Camera {
         let k = Intrinsics::from_hfov(640, 384, 100.0).unwrap();
