@@ -90,6 +90,14 @@ async fn status_is_the_published_update_in_words() {
         ..Update::default()
     };
     f.bank.publish_update(&u, fme::config::WordOrder::default());
+    let backend = fme::infer::Backend::DEFAULT;
+    f.shared.with_health(|h| {
+        h.networks.detector = Some(fme::pipeline::Network {
+            path: "models/fish_det_int8.onnx".into(),
+            form: fme::infer::ModelForm::Int8Qdq,
+            backend,
+        })
+    });
     let (code, head, body) = request(f.addr, "GET", "/api/status", None).await;
     assert_eq!(code, 200, "{head}");
     assert!(head.contains("Content-Type: application/json"), "{head}");
@@ -105,6 +113,10 @@ async fn status_is_the_published_update_in_words() {
     assert_eq!(s["status_bits"]["stale"], false);
     assert_eq!(s["fault"], "none");
     assert_eq!(s["health"]["camera_fps"], 29.5);
+    let det = &s["health"]["networks"]["detector"];
+    assert_eq!(det["file"], "models/fish_det_int8.onnx");
+    assert_eq!((det["form"].as_str(), det["backend"].as_str()), (Some("int8-qdq"), Some(backend.name())));
+    assert!(s["health"]["networks"]["depth"].is_null(), "no depth network: null");
     assert_eq!(s["feeding_thresholds_mps"]["on_above"], 0.3);
     f.server.stop().await;
 }

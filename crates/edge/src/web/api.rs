@@ -95,7 +95,20 @@ fn health_json(s: &WebState, u: &crate::output::Update, h: &crate::status::Healt
         },
         "version": env!("CARGO_PKG_VERSION"),
         "backend": fme_core::infer::backend::BUILD,
+        "networks": {
+            "detector": network_json(h.networks.detector.as_ref()),
+            "depth": network_json(h.networks.depth.as_ref()),
+        },
     })
+}
+
+/// One network the pipeline runs (`null` where the stage runs none): file, numeric form, runtime,
+/// as the start-up `networks:` line and `fme_build_info` name them.
+fn network_json(n: Option<&fme_core::pipeline::Network>) -> Value {
+    n.map_or(
+        Value::Null,
+        |n| json!({ "file": n.path.display().to_string(), "form": n.form.name(), "backend": n.backend.name() }),
+    )
 }
 
 /// The query of `/api/activity`: `from` and `to` as Unix ms or `YYYY-MM-DDTHH:MM:SS(.mmm)Z`

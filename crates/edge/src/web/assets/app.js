@@ -167,6 +167,7 @@ function health() {
         ["Source", h.source],
         ["Uptime", s.uptime_s + " s"],
         ["Version", h.version + " (" + h.backend + ")"],
+        ["Networks", ["detector", "depth"].map((k) => { const n = h.networks[k]; return n ? `${k} ${n.file} (${n.form}, ${n.backend})` : k + " none"; }).join("; ")],
       ];
       const dl = $("health");
       dl.replaceChildren();
