@@ -103,6 +103,7 @@ demo-run: build
 # CPU, RSS) and a long as-fast-as-possible run (memory flatness).
 bench-daemon: setup
 	$(CARGO) bench --locked --bench daemon_replay
+	$(CARGO) bench --locked --bench daemon_web
 # Tracker speed and quality; mot15 parity/quality need ../shared/benchmarks/mot15 (and the
 # motmetrics venv for quality: see scripts/check_motmetrics.py).
 bench-track: build
