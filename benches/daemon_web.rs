@@ -15,21 +15,15 @@
 //! (default 2), `FME_BENCH_WEB_BROWSER=0` (skip the browser). Run without `--bench` (as
 //! `cargo test --all-targets` does) it only smoke-runs: one round of 2 s, no browser.
 
+#[path = "../tests/daemon/support.rs"]
+mod support;
+
 use std::io::{Read as _, Write as _};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-/// A child process killed when dropped, however the bench ends.
-struct Running(Child);
-
-impl Drop for Running {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+use support::{Running, free_port};
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 enum Mode {
@@ -40,10 +34,6 @@ enum Mode {
 
 fn env_num(key: &str, default: u64) -> u64 {
     std::env::var(key).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("free port")
 }
 
 /// utime + stime of `pid` in seconds (clock ticks of 100 Hz).
@@ -120,7 +110,7 @@ fn run(mode: Mode, span: Duration) -> (f64, u32) {
         std::thread::sleep(Duration::from_millis(100));
     }
     std::thread::sleep(Duration::from_secs(3)); // models loaded, the pipeline at its pace
-    let _browser = (mode == Mode::Browser).then(|| {
+    let mut browser = (mode == Mode::Browser).then(|| {
         let program = chromium().expect("chromium");
         start_browser(&program, &state.path().join("chromium"), web)
     });
@@ -138,6 +128,9 @@ fn run(mode: Mode, span: Duration) -> (f64, u32) {
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
     }
     let (c1, wall) = (cpu_seconds(pid), t0.elapsed().as_secs_f64());
+    if let Some(b) = browser.as_mut() {
+        assert!(matches!(b.0.try_wait(), Ok(None)), "chromium showed the page for the whole span");
+    }
     assert_eq!(get(web, "/api/status").0, 200, "the daemon still serves");
     ((c1 - c0) / wall * 100.0, if mode == Mode::Client { pictures } else { 0 })
 }
