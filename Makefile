@@ -100,10 +100,12 @@ demo-run: build
 	$(BIN) run --config config/fme.toml --source $(DEMO_SEQ) --modbus-listen 127.0.0.1:5020 --set 'web.listen="$(DEMO_WEB)"' --live --max-frames $(DEMO_FRAMES)
 
 # The whole daemon with the real pipeline on the bundled recording: real-time replay (drops, latency,
-# CPU, RSS) and a long as-fast-as-possible run (memory flatness).
+# CPU, RSS) and a long as-fast-as-possible run (memory flatness); then its CPU over an RTSP camera
+# against the folder (daemon_rtsp) and with the web page open against without (daemon_web).
 bench-daemon: setup
 	$(CARGO) bench --locked --bench daemon_replay
 	$(CARGO) bench --locked --bench daemon_rtsp
+	$(CARGO) bench --locked --bench daemon_web
 # Tracker speed and quality; mot15 parity/quality need ../shared/benchmarks/mot15 (and the
 # motmetrics venv for quality: see scripts/check_motmetrics.py).
 bench-track: build

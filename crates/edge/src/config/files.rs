@@ -6,7 +6,7 @@
 use super::Config;
 
 /// Checks every file `cfg` names: the calibration (or a recording's own `meta.json`), the two
-/// models (ONNX structure), a recorded source, and the MQTT password and TLS files. The first
+/// models (ONNX structure), a recorded source, and the MQTT password and TLS files, the web page's token and TLS files. The first
 /// problem is the error, as (dotted key, message naming the file).
 pub fn check(cfg: &Config) -> Result<(), (String, String)> {
     fn keyed(key: &'static str) -> impl Fn(String) -> (String, String) {
@@ -36,6 +36,7 @@ pub fn check(cfg: &Config) -> Result<(), (String, String)> {
     }
     // Read, never shown: only the file is named.
     cfg.web.token().map_err(keyed("web.token_file"))?;
+    crate::web::tls::server_config(&cfg.web)?;
     if !q.ca_file.as_os_str().is_empty() {
         crate::output::mqtt::read_pem_certs(&q.ca_file).map_err(keyed("output.mqtt.ca_file"))?;
     }

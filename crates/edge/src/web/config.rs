@@ -25,6 +25,10 @@ pub struct WebConfig {
     pub header_timeout_ms: u64,
     /// A request not answered within this long (waiting for its turn included) is answered 408, ms.
     pub request_timeout_ms: u64,
+    /// TLS: the server's certificate chain (PEM); empty = plain HTTP. Needs `tls_key`.
+    pub tls_cert: PathBuf,
+    /// TLS: the certificate's private key (PEM); never shown, only the file is named.
+    pub tls_key: PathBuf,
 }
 
 impl Default for WebConfig {
@@ -38,17 +42,25 @@ impl Default for WebConfig {
             max_requests: 16,
             header_timeout_ms: 2000,
             request_timeout_ms: 10_000,
+            tls_cert: PathBuf::new(),
+            tls_key: PathBuf::new(),
         }
     }
 }
 
 impl WebConfig {
-    /// The address (when on) and the allow list must parse.
+    /// The address (when on) and the allow list must parse; the TLS files come as a pair.
     pub fn validate(&self) -> Result<(), KeyError> {
         ensure(
             self.listen.is_empty() || is_host_port(&self.listen),
             "web.listen",
             format!("must be HOST:PORT (e.g. \"0.0.0.0:8080\") or empty (off), got {:?}", self.listen),
+        )?;
+        let (no_cert, no_key) = (self.tls_cert.as_os_str().is_empty(), self.tls_key.as_os_str().is_empty());
+        ensure(
+            no_cert == no_key,
+            if no_key { "web.tls_key" } else { "web.tls_cert" },
+            "TLS needs both web.tls_cert and web.tls_key (PEM files), or neither (plain HTTP)",
         )?;
         AllowList::parse(&self.allow).map(drop).map_err(|e| KeyError::new("web.allow", e))
     }

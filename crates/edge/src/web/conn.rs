@@ -11,7 +11,7 @@ use hyper_util::rt::{TokioIo, TokioTimer};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
-use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+use tokio::io::{AsyncRead, AsyncReadExt as _, AsyncWrite, AsyncWriteExt as _};
 use tower::ServiceExt as _;
 
 /// A kept-alive connection with no request for this long is closed.
@@ -26,8 +26,10 @@ pub(super) struct ConnCtx {
     pub state: Arc<WebState>,
     /// The routes (with their limits as layers).
     pub router: axum::Router,
-    /// Time to send a complete request head.
+    /// Time to send a complete request head (and, with TLS, as long again for the handshake).
     pub header_timeout: Duration,
+    /// `[web] tls_cert`/`tls_key`: TLS on this listener.
+    pub tls: Option<Arc<rustls::ServerConfig>>,
 }
 
 impl ConnCtx {
@@ -38,8 +40,27 @@ impl ConnCtx {
     }
 }
 
-/// Serves one admitted connection; `slot` gives its place back when it ends.
-pub(super) async fn serve_connection(mut stream: tokio::net::TcpStream, ctx: Arc<ConnCtx>, slot: Slot) {
+/// Serves one admitted connection (after the TLS handshake when the listener has TLS); `slot`
+/// gives its place back when it ends.
+pub(super) async fn serve_connection(stream: tokio::net::TcpStream, ctx: Arc<ConnCtx>, slot: Slot) {
+    let Some(server) = ctx.tls.clone() else {
+        return serve_stream(stream, ctx, slot).await;
+    };
+    match super::tls::handshake(&server, stream, ctx.header_timeout).await {
+        super::tls::Start::Tls(s) => serve_stream(*s, ctx, slot).await,
+        super::tls::Start::Plain(s) => {
+            slot.head_done();
+            refuse(s, 400, "this port speaks HTTPS: use https://\n").await;
+        }
+        super::tls::Start::Gone => {}
+    }
+}
+
+/// Serves one connection's byte stream: the first head checked here, then hyper.
+async fn serve_stream<S>(mut stream: S, ctx: Arc<ConnCtx>, slot: Slot)
+where
+    S: AsyncRead + AsyncWrite + Unpin + Send + 'static,
+{
     let mut buf = Box::new([0u8; MAX_HEAD]);
     let mut len = 0;
     let head = tokio::time::timeout(ctx.header_timeout, read_head(&mut stream, &mut buf, &mut len)).await;
@@ -58,7 +79,12 @@ pub(super) async fn serve_connection(mut stream: tokio::net::TcpStream, ctx: Arc
     };
     if code != 0 {
         ctx.note(code);
-        refuse(stream, code).await;
+        let body = match code {
+            408 => "request timeout\n",
+            431 => "request head too large\n",
+            _ => "bad request\n",
+        };
+        refuse(stream, code, body).await;
         return;
     }
     let slot = Arc::new(slot);
@@ -92,12 +118,7 @@ pub(super) async fn serve_connection(mut stream: tokio::net::TcpStream, ctx: Arc
 
 /// Writes the error answer `code` and closes, reading a little of what the peer still sends so
 /// that closing does not reset the connection before the peer has read the answer.
-async fn refuse(mut stream: tokio::net::TcpStream, code: u16) {
-    let body = match code {
-        408 => "request timeout\n",
-        431 => "request head too large\n",
-        _ => "bad request\n",
-    };
+async fn refuse<S: AsyncRead + AsyncWrite + Unpin>(mut stream: S, code: u16, body: &str) {
     let written = tokio::time::timeout(WRITE_TIMEOUT, async {
         stream.write_all(&response(code, body)).await?;
         stream.shutdown().await

@@ -1,4 +1,4 @@
-//! The connection's byte stream as hyper sees it: the bytes the server already read (the first
+//! The connection's byte stream (a socket, or TLS over it) as hyper sees it: the bytes the server already read (the first
 //! request head, [`super::request`]) replayed first, then the socket; a write that makes no
 //! progress for [`super::WRITE_TIMEOUT`] (a peer that does not read) and a read that waits longer
 //! than the idle limit (a kept-alive connection nobody uses) end the connection.
@@ -8,23 +8,22 @@ use std::pin::Pin;
 use std::task::{Context, Poll};
 use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
-use tokio::net::TcpStream;
 use tokio::time::Sleep;
 
 /// A socket with bytes read ahead and stall limits.
-pub(super) struct Stream {
+pub(super) struct Stream<S> {
     ahead: Vec<u8>,
     pos: usize,
-    inner: TcpStream,
+    inner: S,
     write_limit: Duration,
     read_limit: Duration,
     write_stall: Option<Pin<Box<Sleep>>>,
     read_stall: Option<Pin<Box<Sleep>>>,
 }
 
-impl Stream {
+impl<S> Stream<S> {
     /// `ahead` is served before anything read from `inner`.
-    pub(super) fn new(ahead: Vec<u8>, inner: TcpStream, write_limit: Duration, read_limit: Duration) -> Self {
+    pub(super) fn new(ahead: Vec<u8>, inner: S, write_limit: Duration, read_limit: Duration) -> Self {
         Self { ahead, pos: 0, inner, write_limit, read_limit, write_stall: None, read_stall: None }
     }
 }
@@ -40,7 +39,7 @@ fn stalled(stall: &mut Option<Pin<Box<Sleep>>>, limit: Duration, cx: &mut Contex
 
 use std::future::Future as _;
 
-impl AsyncRead for Stream {
+impl<S: AsyncRead + Unpin> AsyncRead for Stream<S> {
     fn poll_read(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
         let me = &mut *self;
         if me.pos < me.ahead.len() {
@@ -66,7 +65,7 @@ impl AsyncRead for Stream {
     }
 }
 
-impl AsyncWrite for Stream {
+impl<S: AsyncWrite + Unpin> AsyncWrite for Stream<S> {
     fn poll_write(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
         let me = &mut *self;
         match Pin::new(&mut me.inner).poll_write(cx, buf) {

@@ -24,6 +24,7 @@ pub mod pages;
 pub mod preview;
 mod request;
 pub mod routes;
+pub mod tls;
 
 pub use listener::{HttpLimits, PRIORITY_SCRAPES, PRIORITY_WINDOW};
 pub use request::request_line_ok;
@@ -144,8 +145,14 @@ pub async fn spawn(
 
 /// [`spawn`] with a given state (tests: a fake one).
 pub async fn spawn_with(cfg: &Config, state: Arc<WebState>) -> Option<WebServer> {
-    let web = bind(Kind::Web, &cfg.web.listen, &cfg.web.allow, &state).await;
-    let metrics = bind(Kind::Metrics, &cfg.output.metrics.listen, &cfg.output.metrics.allow, &state).await;
+    let (tls, web) = match web_tls(cfg, &state) {
+        Ok(tls) => {
+            let scheme = if tls.is_some() { "https" } else { "http" };
+            (tls, bind(Kind::Web, &cfg.web.listen, &cfg.web.allow, &state, scheme).await)
+        }
+        Err(()) => (None, None),
+    };
+    let metrics = bind(Kind::Metrics, &cfg.output.metrics.listen, &cfg.output.metrics.allow, &state, "http").await;
     let (web_addr, metrics_addr) = (web.as_ref().map(|w| w.1), metrics.as_ref().map(|m| m.1));
     if web.is_none() && metrics.is_none() {
         return None;
@@ -157,6 +164,7 @@ pub async fn spawn_with(cfg: &Config, state: Arc<WebState>) -> Option<WebServer>
             state: state.clone(),
             router: routes::web(state.clone()),
             header_timeout: header(cfg.web.header_timeout_ms),
+            tls,
         };
         listener::serve(l, HttpLimits::web(&cfg.web), Arc::new(ctx))
     });
@@ -166,6 +174,7 @@ pub async fn spawn_with(cfg: &Config, state: Arc<WebState>) -> Option<WebServer>
             state: state.clone(),
             router: routes::metrics_only(state.clone()),
             header_timeout: header(cfg.output.metrics.header_timeout_ms),
+            tls: None,
         };
         listener::serve(l, HttpLimits::metrics(&cfg.output.metrics), Arc::new(ctx))
     });
@@ -185,12 +194,25 @@ pub async fn spawn_with(cfg: &Config, state: Arc<WebState>) -> Option<WebServer>
     Some(WebServer { web_addr, metrics_addr, task })
 }
 
+/// The web listener's TLS (`None`: plain HTTP); `Err` when the web page is on and its TLS files
+/// cannot be used: logged naming the file, and the page stays off rather than falling back to
+/// plain HTTP.
+fn web_tls(cfg: &Config, state: &WebState) -> Result<Option<Arc<rustls::ServerConfig>>, ()> {
+    if cfg.web.listen.is_empty() {
+        return Ok(None);
+    }
+    tls::server_config(&cfg.web).map_err(|(key, msg)| {
+        state.shared.log(Level::ERROR, format!("web: {key}: {msg}; the web page is off, everything else runs"));
+    })
+}
+
 /// Binds one listener and says so (or why not); `None` when `listen` is empty or cannot be bound.
 async fn bind(
     kind: Kind,
     listen: &str,
     allow: &[String],
     state: &WebState,
+    scheme: &str,
 ) -> Option<(tokio::net::TcpListener, SocketAddr)> {
     if listen.is_empty() {
         return None;
@@ -230,7 +252,7 @@ async fn bind(
             shared.metrics.set_state(format!("on {addr} (GET /metrics){reach}"));
             shared.log(Level::INFO, format!("metrics: Prometheus endpoint on http://{addr}/metrics"));
         }
-        Kind::Web => shared.log(Level::INFO, format!("web: pages on http://{addr}/{reach}")),
+        Kind::Web => shared.log(Level::INFO, format!("web: pages on {scheme}://{addr}/{reach}")),
     }
     if open {
         let msg = format!(

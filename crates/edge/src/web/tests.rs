@@ -88,6 +88,7 @@ async fn start(limits: HttpLimits) -> (SocketAddr, Arc<Shared>, tokio::task::Joi
         state: state.clone(),
         router: routes::metrics_only(state),
         header_timeout: limits.header_timeout,
+        tls: None,
     };
     let task = tokio::spawn(listener::serve(listener, limits, Arc::new(ctx)));
     (addr, shared, task)
