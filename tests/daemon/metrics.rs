@@ -273,6 +273,7 @@ async fn a_metrics_port_in_use_is_logged_and_the_daemon_runs_on() {
     let addr = taken.local_addr().expect("addr");
     let mut cfg = support::test_config(dir.path());
     cfg.output.metrics.listen = addr.to_string();
+    cfg.web.listen = addr.to_string();
     let src: Box<dyn FrameSource> = Box::new(RecordedSource::open(dir.path(), true, true).expect("open"));
     let pipeline = support::edge_pipeline(&cfg);
     let daemon = Daemon::start(cfg, String::new(), src, pipeline, RunOptions::default()).await.expect("starts");
@@ -288,6 +289,7 @@ async fn a_metrics_port_in_use_is_logged_and_the_daemon_runs_on() {
     let mut status = String::new();
     fme::console::Session::default().command("status", &shared, daemon.bank(), &mut status);
     assert!(status.contains("\r\nmetrics failed: cannot listen on"), "console status: {status}");
+    assert!(status.contains("\r\nweb failed: cannot listen on") && status.contains("(web.listen)"), "{status}");
     // The rest runs: frames are processed and the registers update.
     let before = daemon.bank().block()[12];
     let end = Instant::now() + Duration::from_secs(10);

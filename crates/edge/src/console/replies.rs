@@ -105,7 +105,7 @@ pub(super) fn status(shared: &Shared, bank: &RegisterBank, body: &mut String) ->
     let h = shared.health();
     let _ = write!(
         body,
-        "state {}\nstatus 0x{:04x} {}\nfault {} ({}{})\nsource {}\nuptime {} s\nfeeding-recommended {}\ndetections {}\nhistory {}\nmodbus {}\nmetrics {}",
+        "state {}\nstatus 0x{:04x} {}\nfault {} ({}{})\nsource {}\nuptime {} s\nfeeding-recommended {}\ndetections {}\nhistory {}\nmodbus {}\nmetrics {}\nweb {}",
         if shared.stopping() { "stopping" } else { "running" },
         u.status.bits(),
         u.status.words(),
@@ -118,7 +118,8 @@ pub(super) fn status(shared: &Shared, bank: &RegisterBank, body: &mut String) ->
         h.stage.familiarity.describe(),
         shared.history.describe(),
         shared.modbus.get().map_or("off", String::as_str),
-        shared.metrics.describe()
+        shared.metrics.describe(),
+        shared.web.get().map_or("off", String::as_str)
     );
     Ok(())
 }

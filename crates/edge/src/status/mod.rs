@@ -383,6 +383,9 @@ pub struct Shared {
     /// The Modbus role's state for the console's `status` (set once at start: the role, where it
     /// serves, and whether it is open to every address); unset = off.
     pub modbus: OnceLock<String>,
+    /// The web page's state for the console's `status` (set once at start: where it serves, or why
+    /// it is off); unset = off.
+    pub web: OnceLock<String>,
     /// The latest frame the web page asked for (`/api/latest.jpg`), handed over by the pipeline.
     pub preview: crate::web::preview::Preview,
     /// The calibration in use and a reload waiting for the pipeline.
@@ -403,6 +406,7 @@ impl Shared {
             metrics: MetricsStatus::default(),
             word_order: OnceLock::new(),
             modbus: OnceLock::new(),
+            web: OnceLock::new(),
             preview: crate::web::preview::Preview::default(),
             calibration: Default::default(),
         }

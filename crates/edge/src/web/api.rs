@@ -83,6 +83,7 @@ fn health_json(s: &WebState, u: &crate::output::Update, h: &crate::status::Healt
         "mqtt": h.mqtt.link.name(),
         "history": s.shared.history.describe(),
         "metrics": s.shared.metrics.describe(),
+        "web": s.shared.web.get().map_or("off", String::as_str),
         "record": {
             "active": h.record.active,
             "ring_mb": h.record.ring_bytes as f64 / 1e6,

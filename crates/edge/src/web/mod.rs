@@ -203,6 +203,7 @@ fn web_tls(cfg: &Config, state: &WebState) -> Result<Option<Arc<rustls::ServerCo
     }
     tls::server_config(&cfg.web).map_err(|(key, msg)| {
         state.shared.log(Level::ERROR, format!("web: {key}: {msg}; the web page is off, everything else runs"));
+        let _ = state.shared.web.set(format!("failed: {key}: {msg}"));
     })
 }
 
@@ -233,8 +234,11 @@ async fn bind(
             let msg = format!("cannot listen on {listen} ({key}.listen): {e}{hint}");
             let what = if kind == Kind::Web { "the web page" } else { "the Prometheus endpoint" };
             shared.log(Level::ERROR, format!("{}: {msg}; {what} is off, everything else runs", kind.name()));
-            if kind == Kind::Metrics {
-                shared.metrics.set_state(format!("failed: {msg}"));
+            match kind {
+                Kind::Metrics => shared.metrics.set_state(format!("failed: {msg}")),
+                Kind::Web => {
+                    let _ = shared.web.set(format!("failed: {msg}"));
+                }
             }
             return None;
         }
@@ -252,7 +256,10 @@ async fn bind(
             shared.metrics.set_state(format!("on {addr} (GET /metrics){reach}"));
             shared.log(Level::INFO, format!("metrics: Prometheus endpoint on http://{addr}/metrics"));
         }
-        Kind::Web => shared.log(Level::INFO, format!("web: pages on {scheme}://{addr}/{reach}")),
+        Kind::Web => {
+            let _ = shared.web.set(format!("on {scheme}://{addr}/{reach}"));
+            shared.log(Level::INFO, format!("web: pages on {scheme}://{addr}/{reach}"));
+        }
     }
     if open {
         let msg = format!(
