@@ -24,7 +24,7 @@ pub struct SolveRequest {
     pub references: Vec<RefIn>,
     /// Known intrinsics; without them fx = fy, cx, cy are estimated (six or more non-coplanar).
     #[serde(default)]
-    pub intrinsics: Option<IntrinsicsIn>,
+    pub intrinsics: Option<Intrinsics>,
     /// Write the file and reload it into the pipeline (else: solve only).
     #[serde(default)]
     pub apply: bool,
@@ -68,23 +68,6 @@ pub struct RefIn {
     pub u: f64,
     /// Clicked pixel, v down.
     pub v: f64,
-}
-
-/// Known intrinsics.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct IntrinsicsIn {
-    /// Focal length along u, pixels.
-    pub fx: f64,
-    /// Focal length along v, pixels.
-    pub fy: f64,
-    /// Principal point u, pixels.
-    pub cx: f64,
-    /// Principal point v, pixels.
-    pub cy: f64,
-    /// Brown-Conrady k1 k2 p1 p2 k3 (default none).
-    #[serde(default)]
-    pub distortion: [f64; 5],
 }
 
 /// A checked request: what the solver takes.
@@ -145,14 +128,10 @@ impl SolveRequest {
                 pixel: Pixel::new(r.u, r.v),
             });
         }
-        let intrinsics = match &self.intrinsics {
-            Some(k) => {
-                let k = Intrinsics { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy, distortion: k.distortion };
-                k.validate().map_err(|e| format!("intrinsics: {e}"))?;
-                Some(k)
-            }
-            None => None,
-        };
+        if let Some(k) = &self.intrinsics {
+            k.validate().map_err(|e| format!("intrinsics: {e}"))?;
+        }
+        let intrinsics = self.intrinsics;
         Ok(Checked { refs, intrinsics, opts })
     }
 }
