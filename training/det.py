@@ -373,11 +373,13 @@ def peak_max(hm, sub):
     return cols.reshape(hm.shape)
 
 
-def from_onnx(path, sub=2):
+def from_onnx(path, sub=2, arch=None):
     """A FishDet holding the weights of an exported fp32 file (`export`, with the head's last 1x1
     convolution as a Conv or as `decode_nhwc`'s Gemm), for re-exporting it with this module's
     current graph tail without training again. The export folded each BatchNorm into its
-    convolution; here every BatchNorm becomes the identity plus that bias (eps 0, so exactly)."""
+    convolution; here every BatchNorm becomes the identity plus that bias (eps 0, so exactly).
+    `arch` in PRETRAINED_ARCHS: the file is an MNV2Det export of that layout (a second stage of a
+    pretrained run starts from it; the body's BatchNorms were already folded ones)."""
     import onnx
     from onnx import numpy_helper
 
@@ -386,8 +388,12 @@ def from_onnx(path, sub=2):
     def module_name(node):
         # Scope "/s4/s4.1/a/a.0/Conv" is module "s4.1.a.0" (Sequential children carry their parent's
         # name as a prefix); its BatchNorm is the next child, "s4.1.a.1".
+        # A scope part named for a plain attribute ("/body/blocks.0/dw/conv/Conv") stays whole.
         scope = node.name.strip("/").split("/")[:-1]
-        return ".".join([scope[0]] + [p.split(".")[-1] for p in scope[1:]])
+        names = [scope[0]]
+        for prev, part in zip(scope, scope[1:]):
+            names.append(part[len(prev) + 1:] if part.startswith(prev + ".") else part)
+        return ".".join(names)
 
     # The layout from the module names ("s8.2.*" is the second stride-8 block, "h.*" the head conv), the
     # widths from the output channels of each stage's first convolution and of the FPN's laterals.
@@ -401,8 +407,13 @@ def from_onnx(path, sub=2):
     # The parts with depthwise-separable convolutions (`sep`): those with grouped ones ("s4.1.a.0" is in "s4").
     sep = tuple(sorted({module_name(n).split(".")[0] for n in m.graph.node if n.op_type == "Conv"
                         for a in n.attribute if a.name == "group" and a.i > 1}))
-    model = FishDet(sub=sub, s8_blocks=max(s8, default=0), head_conv=any(k.startswith("h.") for k in out_ch),
-                    sep=sep, **widths)
+    head_conv = any(k.startswith("h.") for k in out_ch)
+    if arch in PRETRAINED_ARCHS:
+        neck = {k: v for k, v in widths.items() if k != "w"} or {"fpn": out_ch["l32.0"], "head": out_ch["l4.0"]}
+        kw = dict(PRETRAINED_ARCHS[arch], sep=tuple(p for p in sep if p != "body"))
+        model = MNV2Det(sub=sub, head_conv=head_conv, **neck, **kw)
+    else:
+        model = FishDet(sub=sub, s8_blocks=max(s8, default=0), head_conv=head_conv, sep=sep, **widths)
     mods = dict(model.named_modules())
     done = set()
 
@@ -428,7 +439,8 @@ def from_onnx(path, sub=2):
         w, bias = torch.from_numpy(init[n.input[1]].copy()), torch.from_numpy(init[n.input[2]].copy())
         parent, _, idx = mod_name.rpartition(".")
         conv_m = mods.get(mod_name)
-        bn = mods.get(f"{parent}.{int(idx) + 1}") if idx.isdigit() else None
+        # A Sequential's BatchNorm is the next child ("s4.1.a.1"); a TFConv's is its sibling "bn".
+        bn = mods.get(f"{parent}.{int(idx) + 1}") if idx.isdigit() else mods.get(f"{parent}.bn")
         if not isinstance(conv_m, nn.Conv2d) or not isinstance(bn, nn.BatchNorm2d) or conv_m.weight.shape != w.shape:
             raise SystemExit(f"{path}: node {n.name} (weights {tuple(w.shape)}) has no matching convolution in "
                              f"FishDet(sub={sub}) (not a FishDet export?)")

@@ -128,9 +128,7 @@ def main():
         f"{len(images) - n_real} renders; held out: {', '.join(f'{k} {len(v[0])}' for k, v in val.items())} "
         f"({time.time() - t0:.0f} s)")
 
-    if args.init and args.arch in det.PRETRAINED_ARCHS:
-        raise SystemExit("--init reads FishDet exports only; an mnv2 run starts from its pretrained body")
-    init = det.from_onnx(args.base, 2) if finetune else det.from_onnx(args.init, 2) if args.init else None
+    init = det.from_onnx(args.base, 2) if finetune else det.from_onnx(args.init, 2, args.arch) if args.init else None
     fp32 = os.path.join(args.out, "fish_det_fp32.onnx")
     before = None
     if finetune:

