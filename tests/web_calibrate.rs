@@ -19,19 +19,10 @@ use std::io::{Read as _, Write as _};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use support::{Running, free_port};
+use support::{Running, free_port, get_json};
 
 const META: &str = "tests/data/swarm20/meta.json";
 const TOKEN: &str = "calibrate-test-token";
-
-fn get_json(port: u16, path: &str) -> Option<Value> {
-    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).ok()?;
-    s.set_read_timeout(Some(Duration::from_secs(5))).ok()?;
-    s.write_all(format!("GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n").as_bytes()).ok()?;
-    let mut raw = String::new();
-    s.read_to_string(&mut raw).ok()?;
-    serde_json::from_str(raw.strip_prefix("HTTP/1.1 200")?.split_once("\r\n\r\n")?.1).ok()
-}
 
 /// The camera `/api/calibration` reports, and how many calibrations the daemon has taken.
 fn daemon_camera(port: u16) -> Option<(Camera, u64)> {

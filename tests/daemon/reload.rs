@@ -2,24 +2,13 @@
 //! camera moved 0.3 m); a bad file written over it and SIGHUP are refused (logged, the old one
 //! keeps running); the true file and SIGHUP are applied: `/api/calibration` shows the new camera.
 
-use crate::support::{Running, free_port};
+use crate::support::{Running, free_port, get_json};
 use serde_json::Value;
-use std::io::{Read as _, Write as _};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 const META: &str = "tests/data/swarm20/meta.json";
-
-fn get_json(port: u16, path: &str) -> Option<Value> {
-    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).ok()?;
-    s.set_read_timeout(Some(Duration::from_secs(5))).ok()?;
-    s.write_all(format!("GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n").as_bytes()).ok()?;
-    let mut raw = String::new();
-    s.read_to_string(&mut raw).ok()?;
-    let body = raw.strip_prefix("HTTP/1.1 200")?.split_once("\r\n\r\n")?.1;
-    serde_json::from_str(body).ok()
-}
 
 /// The x of the camera centre the daemon uses, and how many calibrations it has taken.
 fn in_use(port: u16) -> Option<(f64, u64)> {

@@ -198,3 +198,14 @@ pub async fn wait_until(what: &str, secs: u64, mut f: impl FnMut() -> bool) {
         tokio::time::sleep(std::time::Duration::from_millis(20)).await;
     }
 }
+
+/// `GET path` on 127.0.0.1:`port` as JSON; `None` unless the answer is a 200 with a JSON body.
+pub fn get_json(port: u16, path: &str) -> Option<serde_json::Value> {
+    use std::io::{Read as _, Write as _};
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).ok()?;
+    s.set_read_timeout(Some(std::time::Duration::from_secs(5))).ok()?;
+    s.write_all(format!("GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n").as_bytes()).ok()?;
+    let mut raw = String::new();
+    s.read_to_string(&mut raw).ok()?;
+    serde_json::from_str(raw.strip_prefix("HTTP/1.1 200")?.split_once("\r\n\r\n")?.1).ok()
+}
