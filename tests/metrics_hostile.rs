@@ -2,6 +2,9 @@
 //! many connections as it can, a request head trickled a byte at a time, reconnecting whenever the
 //! server closes one) do not keep a steady scraper from its answers, with the shipped limits.
 
+#[path = "common/web_lan.rs"]
+mod web_lan;
+
 use fme::config::MetricsConfig;
 use fme::output::bank::RegisterBank;
 use fme::status::Shared;
@@ -10,13 +13,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
-use tokio::net::{TcpSocket, TcpStream};
-
-async fn connect_from(from: &str, to: SocketAddr) -> Option<TcpStream> {
-    let s = TcpSocket::new_v4().ok()?;
-    s.bind(format!("{from}:0").parse().ok()?).ok()?;
-    tokio::time::timeout(Duration::from_secs(2), s.connect(to)).await.ok()?.ok()
-}
+use web_lan::{connect_from, slowloris};
 
 /// Whether one scrape from 127.0.0.1 is answered 200 within 2 s.
 async fn scrape(addr: SocketAddr) -> bool {
@@ -27,27 +24,6 @@ async fn scrape(addr: SocketAddr) -> bool {
     let mut buf = Vec::new();
     let _ = tokio::time::timeout(Duration::from_secs(2), s.read_to_end(&mut buf)).await;
     buf.starts_with(b"HTTP/1.1 200 OK\r\n")
-}
-
-/// One slowloris connection loop from `from`: a request line, then one header byte every 100 ms,
-/// a new connection as soon as the server closes this one.
-async fn slowloris(from: &'static str, addr: SocketAddr, stop: Arc<AtomicBool>) {
-    while !stop.load(Ordering::Relaxed) {
-        let Some(mut s) = connect_from(from, addr).await else {
-            tokio::time::sleep(Duration::from_millis(20)).await;
-            continue;
-        };
-        let mut ok = s.write_all(b"GET /metrics HTTP/1.1\r\nX-Slow: ").await.is_ok();
-        while ok && !stop.load(Ordering::Relaxed) {
-            tokio::time::sleep(Duration::from_millis(100)).await;
-            ok = s.write_all(b"a").await.is_ok();
-            let mut b = [0u8; 64];
-            // Closed (EOF, reset) or answered (408): reconnect.
-            if tokio::time::timeout(Duration::from_millis(1), s.read(&mut b)).await.is_ok() {
-                ok = false;
-            }
-        }
-    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -67,7 +43,7 @@ async fn a_steady_scraper_is_answered_through_slowloris_from_four_addresses() {
     let mut attackers = Vec::new();
     for host in ["127.0.0.2", "127.0.0.3", "127.0.0.4", "127.0.0.5"] {
         for _ in 0..8 {
-            attackers.push(tokio::spawn(slowloris(host, addr, stop.clone())));
+            attackers.push(tokio::spawn(slowloris(host, addr, "/metrics", stop.clone())));
         }
     }
     tokio::time::sleep(Duration::from_millis(500)).await; // every slot the attackers can get, taken

@@ -3,64 +3,28 @@
 //! (garbage, 10 KB headers, slowloris, a connection flood from one address) leaves a normal request
 //! answered. A fake state: no pipeline, no camera.
 
-use fme::config::Config;
 use fme::history::{HistoryRow, format_row};
-use fme::output::bank::RegisterBank;
 use fme::output::{StatusBits, Update};
-use fme::status::{FaultCode, Shared};
-use fme::web::routes::RouteLimits;
-use fme::web::{WebServer, WebState};
+use fme::status::FaultCode;
 use std::net::SocketAddr;
-use std::sync::Arc;
 use std::time::Duration;
 use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
-use tokio::net::{TcpSocket, TcpStream};
+
+#[path = "common/web_lan.rs"]
+mod web_lan;
+
+use web_lan::{connect_from, exchange, start_with_token};
 
 const TOKEN: &str = "test-token-0123456789";
 
-struct Fixture {
-    server: WebServer,
-    addr: SocketAddr,
-    shared: Arc<Shared>,
-    bank: Arc<RegisterBank>,
+async fn start(token: Option<&str>, tweak: impl FnOnce(&mut fme::config::Config)) -> web_lan::Fixture {
+    start_with_token(token, tweak).await.expect("serves")
 }
 
-async fn start(token: Option<&str>, tweak: impl FnOnce(&mut Config)) -> Fixture {
-    let mut cfg = Config::default();
-    cfg.web.listen = "127.0.0.1:0".into();
-    tweak(&mut cfg);
-    let shared = Arc::new(Shared::new(String::new(), 64));
-    let bank = Arc::new(RegisterBank::new());
-    let state = WebState {
-        shared: shared.clone(),
-        bank: bank.clone(),
-        stale_after: Duration::from_secs(5),
-        token: token.map(str::to_string),
-        feeding: (0.3, 0.2),
-        source: "tests/data/swarm20".into(),
-        limits: RouteLimits::from_config(&cfg.web),
-    };
-    let server = fme::web::spawn_with(&cfg, Arc::new(state)).await.expect("serves");
-    let addr = server.web_addr.expect("web listener");
-    Fixture { server, addr, shared, bank }
-}
-
-async fn connect_from(from: &str, to: SocketAddr) -> TcpStream {
-    let s = TcpSocket::new_v4().expect("socket");
-    s.bind(format!("{from}:0").parse().expect("address")).expect("bind");
-    s.connect(to).await.expect("connect")
-}
-
-/// Sends `raw` from 127.0.0.1 and reads the answer to the end: (code, head, body).
+/// `raw` on a new connection from 127.0.0.1, the answer read to the end.
 async fn raw(addr: SocketAddr, raw: &[u8]) -> (u16, String, Vec<u8>) {
-    let mut s = connect_from("127.0.0.1", addr).await;
-    let _ = s.write_all(raw).await;
-    let mut buf = Vec::new();
-    let _ = tokio::time::timeout(Duration::from_secs(5), s.read_to_end(&mut buf)).await;
-    let split = buf.windows(4).position(|w| w == b"\r\n\r\n").map_or(buf.len(), |i| i + 4);
-    let head = String::from_utf8_lossy(&buf[..split]).into_owned();
-    let code = head.get(9..12).and_then(|c| c.parse().ok()).unwrap_or(0);
-    (code, head, buf[split..].to_vec())
+    let mut s = connect_from("127.0.0.1", addr).await.expect("connect");
+    exchange(&mut s, raw).await
 }
 
 async fn request(addr: SocketAddr, method: &str, path: &str, auth: Option<&str>) -> (u16, String, Vec<u8>) {
@@ -261,11 +225,11 @@ async fn a_hostile_client_leaves_a_normal_request_answered() {
     assert!(code == 431 || code == 0, "10 KB head: {code}");
     assert!(ok(f.addr).await, "after garbage");
     // A slowloris connection and a flood from one address (more than it may hold).
-    let mut slow = connect_from("127.0.0.2", f.addr).await;
+    let mut slow = connect_from("127.0.0.2", f.addr).await.expect("connect");
     slow.write_all(b"GET /api/status HTTP/1.1\r\nX-Slow: ").await.expect("write");
     let mut flood = Vec::new();
     for _ in 0..20 {
-        flood.push(connect_from("127.0.0.3", f.addr).await);
+        flood.push(connect_from("127.0.0.3", f.addr).await.expect("connect"));
     }
     tokio::time::sleep(Duration::from_millis(100)).await;
     assert!(ok(f.addr).await, "during the slowloris and the flood");

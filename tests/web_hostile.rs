@@ -50,7 +50,7 @@ async fn attack(
     let mut tasks = Vec::new();
     for host in ["127.0.0.2", "127.0.0.3", "127.0.0.4", "127.0.0.5"] {
         for _ in 0..8 {
-            tasks.push(tokio::spawn(slowloris(host, addr, stop.clone())));
+            tasks.push(tokio::spawn(slowloris(host, addr, "/api/status", stop.clone())));
         }
     }
     let mut huge = b"GET /api/status HTTP/1.1\r\nX-Filler: ".to_vec();

@@ -24,6 +24,11 @@ pub struct Fixture {
 /// Serves `[web]` on a loopback port with `tweak` applied to the default configuration; `None`
 /// when the server does not start (e.g. unusable TLS files).
 pub async fn start(tweak: impl FnOnce(&mut Config)) -> Option<Fixture> {
+    start_with_token(None, tweak).await
+}
+
+/// As [`start`], with the actions' token (`None`: actions refused).
+pub async fn start_with_token(token: Option<&str>, tweak: impl FnOnce(&mut Config)) -> Option<Fixture> {
     let mut cfg = Config::default();
     cfg.web.listen = "127.0.0.1:0".into();
     tweak(&mut cfg);
@@ -33,7 +38,7 @@ pub async fn start(tweak: impl FnOnce(&mut Config)) -> Option<Fixture> {
         shared: shared.clone(),
         bank: bank.clone(),
         stale_after: Duration::from_secs(5),
-        token: None,
+        token: token.map(str::to_string),
         feeding: (0.3, 0.2),
         source: "tests/data/swarm20".into(),
         limits: RouteLimits::from_config(&cfg.web),
@@ -76,16 +81,16 @@ pub async fn get_code(addr: SocketAddr, path: &str) -> u16 {
     }
 }
 
-/// One slowloris connection loop from `from`: a request line, then one header byte every 100 ms,
-/// a new connection as soon as the server closes or answers this one; until `stop`.
-pub async fn slowloris(from: &'static str, addr: SocketAddr, stop: Arc<std::sync::atomic::AtomicBool>) {
+/// One slowloris connection loop from `from`: a `GET path` request line, then one header byte every
+/// 100 ms, a new connection as soon as the server closes or answers this one; until `stop`.
+pub async fn slowloris(from: &'static str, addr: SocketAddr, path: &str, stop: Arc<std::sync::atomic::AtomicBool>) {
     use std::sync::atomic::Ordering;
     while !stop.load(Ordering::Relaxed) {
         let Some(mut s) = connect_from(from, addr).await else {
             tokio::time::sleep(Duration::from_millis(20)).await;
             continue;
         };
-        let mut ok = s.write_all(b"GET /api/status HTTP/1.1\r\nX-Slow: ").await.is_ok();
+        let mut ok = s.write_all(format!("GET {path} HTTP/1.1\r\nX-Slow: ").as_bytes()).await.is_ok();
         while ok && !stop.load(Ordering::Relaxed) {
             tokio::time::sleep(Duration::from_millis(100)).await;
             ok = s.write_all(b"a").await.is_ok();
