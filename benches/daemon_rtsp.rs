@@ -12,13 +12,14 @@
 //! (folder / RTSP pairs, default 2). Run without `--bench` (as `cargo test --all-targets` does) it
 //! only smoke-runs: one pair of 3 s.
 
-use std::io::{BufRead, BufReader};
+#[allow(dead_code)] // the tests' other servers
+#[path = "../tests/rtsp/servers.rs"]
+mod servers;
+
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 use tokio_modbus::prelude::*;
 
-/// Debian's Python, where `python3-gi` installs (a pyenv `python3` earlier on PATH lacks it).
-const PYTHON: &str = "/usr/bin/python3";
 const SEQ: &str = "tests/data/swarm20";
 
 /// A child process killed when dropped.
@@ -34,31 +35,6 @@ impl Drop for Killed {
 /// Ends the bench with `message`; a panic, so that the children are killed on the way out.
 fn fail(message: String) -> ! {
     panic!("daemon_rtsp: {message}")
-}
-
-/// tests/rtsp_server.py on a free loopback port; the port once it listens.
-fn rtsp_server() -> (Killed, u16) {
-    let child = Command::new(PYTHON)
-        .args(["tests/rtsp_server.py", &format!("{SEQ}/img1"), "30", "0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap_or_else(|e| fail(format!("cannot start {PYTHON} tests/rtsp_server.py: {e}: run `make setup`")));
-    let mut server = Killed(child);
-    let Some(stdout) = server.0.stdout.take() else { fail("no stdout of tests/rtsp_server.py".into()) };
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let mut line = String::new();
-        let _ = BufReader::new(stdout).read_line(&mut line);
-        let _ = tx.send(line);
-    });
-    let line = rx.recv_timeout(Duration::from_secs(20)).unwrap_or_default();
-    match line.trim().strip_prefix("port ").and_then(|p| p.parse().ok()) {
-        Some(port) => (server, port),
-        None => fail(format!(
-            "tests/rtsp_server.py did not start ({line:?}): `make setup` installs GStreamer's RTSP server"
-        )),
-    }
 }
 
 /// utime + stime of process `pid`, s.
@@ -150,8 +126,8 @@ async fn main() {
     let secs = env("FME_BENCH_RTSP_S", if bench_mode { 20 } else { 3 });
     let rounds = env("FME_BENCH_ROUNDS", if bench_mode { 2 } else { 1 });
     let warm = if bench_mode { 5 } else { 1 };
-    let (_server, port) = rtsp_server();
-    let url = format!("rtsp://127.0.0.1:{port}/h264");
+    let server = servers::GstServer::start(0);
+    let url = server.url("/h264");
     println!("daemon_rtsp: fme run on {SEQ} (640x384, 30 fps) from its folder and as H.264 over RTSP ({url})");
     let mut sums = [0.0f64; 2];
     for round in 0..rounds {
