@@ -140,6 +140,28 @@ def eval_detector_confs(sess, images, boxes, confs, iou=0.7):
              "conf": c} for c, (tp, fp, fn) in zip(confs, counts)]
 
 
+SIZE_EDGES = (16, 48, 128)  # long side in network pixels: small, medium, large, very large (a close fish)
+
+
+def recall_by_size(sess, images, boxes, conf=0.3, iou=0.7, edges=SIZE_EDGES):
+    """Recall at IoU 0.5 of the required true boxes, bucketed by their long side (`edges`, network
+    pixels): [(label, n, recall)]. The per-source P / R hides which fish a detector misses; real
+    tanks and cages show fish longer than 128 px that the training images rarely have."""
+    name = sess.get_inputs()[0].name
+    n = np.zeros(len(edges) + 1, int)
+    hit = np.zeros(len(edges) + 1, int)
+    for img, g in zip(images, boxes):
+        x = (img.astype(np.float32).transpose(2, 0, 1)[None] / 255.0)
+        d, _ = decode(sess.run(None, {name: x})[0], conf, iou)
+        gt = clip_gt(g)
+        for b in gt[gt[:, 4] >= VIS_REQUIRED]:
+            k = int(np.searchsorted(edges, max(b[2], b[3]), side="right"))
+            n[k] += 1
+            hit[k] += bool(len(d)) and iou_one(b, d).max() >= 0.5
+    labels = [f"<{edges[0]}"] + [f"{a}-{b}" for a, b in zip(edges, edges[1:])] + [f">={edges[-1]}"]
+    return [(lab, int(k), float(h / k) if k else None) for lab, k, h in zip(labels, n, hit)]
+
+
 def sweep_conf(sess, images, boxes, confs=(0.2, 0.25, 0.3, 0.35, 0.4, 0.5)):
     return [eval_detector(sess, images, boxes, c) for c in confs]
 
