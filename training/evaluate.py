@@ -84,6 +84,12 @@ def clip_gt(g, W=data.NET_W, H=data.NET_H):
 
 def match(dets, gt, thr=0.5):
     """Returns (tp, fp, fn) with don't-care GT (visibility < VIS_REQUIRED)."""
+    tp, fp, found, req = match_found(dets, gt, thr)
+    return tp, fp, int(req.sum() - found.sum())
+
+
+def match_found(dets, gt, thr=0.5):
+    """`match`'s greedy matching: (tp, fp, which required GT boxes were found, which are required)."""
     req = gt[:, 4] >= VIS_REQUIRED
     used = np.zeros(len(gt), bool)
     tp = fp = 0
@@ -106,8 +112,7 @@ def match(dets, gt, thr=0.5):
             used[j] = True  # don't care
             continue
         fp += 1
-    fn = int((req & ~used).sum())
-    return tp, fp, fn
+    return tp, fp, req & used, req
 
 
 def eval_detector(sess, images, boxes, conf=0.25, iou=0.7):
@@ -124,42 +129,34 @@ def eval_detector(sess, images, boxes, conf=0.25, iou=0.7):
     return {"precision": p, "recall": r, "tp": tp, "fp": fp, "fn": fn, "conf": conf}
 
 
+SIZE_EDGES = (16, 48, 128)  # long side in network pixels: small, medium, large, very large (a close fish)
+SIZE_LABELS = ("<16", "16-48", "48-128", ">=128")
+
+
 def eval_detector_confs(sess, images, boxes, confs, iou=0.7):
-    """`eval_detector` at each of `confs`, the network run once per image (the same numbers)."""
+    """`eval_detector` at each of `confs`, the network run once per image (the same numbers), each
+    with `by_size`: [label, required true boxes, recall] by the box's long side (SIZE_EDGES). The
+    aggregate hides which fish a detector misses; real tanks and cages show fish longer than 128 px,
+    which the training images rarely have."""
     name = sess.get_inputs()[0].name
     counts = [[0, 0, 0] for _ in confs]
+    n_size = np.zeros(len(SIZE_LABELS), int)
+    hit_size = np.zeros((len(confs), len(SIZE_LABELS)), int)
     for img, g in zip(images, boxes):
         x = (img.astype(np.float32).transpose(2, 0, 1)[None] / 255.0)
         out = sess.run(None, {name: x})[0]
         gt = clip_gt(g)
-        for c, k in zip(confs, counts):
+        size = np.searchsorted(SIZE_EDGES, np.maximum(gt[:, 2], gt[:, 3]), side="right")
+        n_size += np.bincount(size[gt[:, 4] >= VIS_REQUIRED], minlength=len(SIZE_LABELS))
+        for i, (c, k) in enumerate(zip(confs, counts)):
             d, _ = decode(out, c, iou)
-            a, b, f = match(d, gt)
-            k[0], k[1], k[2] = k[0] + a, k[1] + b, k[2] + f
+            a, b, found, req = match_found(d, gt)
+            k[0], k[1], k[2] = k[0] + a, k[1] + b, k[2] + int(req.sum() - found.sum())
+            hit_size[i] += np.bincount(size[found], minlength=len(SIZE_LABELS))
     return [{"precision": tp / max(tp + fp, 1), "recall": tp / max(tp + fn, 1), "tp": tp, "fp": fp, "fn": fn,
-             "conf": c} for c, (tp, fp, fn) in zip(confs, counts)]
-
-
-SIZE_EDGES = (16, 48, 128)  # long side in network pixels: small, medium, large, very large (a close fish)
-
-
-def recall_by_size(sess, images, boxes, conf=0.3, iou=0.7, edges=SIZE_EDGES):
-    """Recall at IoU 0.5 of the required true boxes, bucketed by their long side (`edges`, network
-    pixels): [(label, n, recall)]. The per-source P / R hides which fish a detector misses; real
-    tanks and cages show fish longer than 128 px that the training images rarely have."""
-    name = sess.get_inputs()[0].name
-    n = np.zeros(len(edges) + 1, int)
-    hit = np.zeros(len(edges) + 1, int)
-    for img, g in zip(images, boxes):
-        x = (img.astype(np.float32).transpose(2, 0, 1)[None] / 255.0)
-        d, _ = decode(sess.run(None, {name: x})[0], conf, iou)
-        gt = clip_gt(g)
-        for b in gt[gt[:, 4] >= VIS_REQUIRED]:
-            k = int(np.searchsorted(edges, max(b[2], b[3]), side="right"))
-            n[k] += 1
-            hit[k] += bool(len(d)) and iou_one(b, d).max() >= 0.5
-    labels = [f"<{edges[0]}"] + [f"{a}-{b}" for a, b in zip(edges, edges[1:])] + [f">={edges[-1]}"]
-    return [(lab, int(k), float(h / k) if k else None) for lab, k, h in zip(labels, n, hit)]
+             "conf": c, "by_size": [[lab, int(n), float(h / n) if n else None]
+                                    for lab, n, h in zip(SIZE_LABELS, n_size, hits)]}
+            for c, (tp, fp, fn), hits in zip(confs, counts, hit_size)]
 
 
 def sweep_conf(sess, images, boxes, confs=(0.2, 0.25, 0.3, 0.35, 0.4, 0.5)):

@@ -48,9 +48,8 @@ def per_source_quality(path, val, nms_iou, log, tag):
         at = {m["conf"]: m for m in out[name]}
         log(f"{tag} {name}: " + ", ".join(f"conf {c}: P {at[c]['precision']:.3f} R {at[c]['recall']:.3f}"
                                           for c in (0.25, 0.3, 0.4)))
-        sizes = evaluate.recall_by_size(sess, images, boxes, 0.3, nms_iou)
         log(f"{tag} {name}: recall at conf 0.3 by long side (px, n): " + ", ".join(
-            f"{lab} ({k}) {'-' if r is None else f'{r:.2f}'}" for lab, k, r in sizes))
+            f"{lab} ({k}) {'-' if r is None else f'{r:.2f}'}" for lab, k, r in at[0.3]["by_size"]))
     return out
 
 
