@@ -1,8 +1,10 @@
-//! `make -C training finetune DATA=DIR` (docs/training.md "Train on your own cage") on tiny labelled
-//! folders in the two layouts CVAT exports: "MOT 1.1" (`img1/` + `gt/gt.txt`, no seqinfo.ini) and
-//! "YOLO 1.1" (`obj_train_data/` with a label file beside each image), made from frames of the
-//! bundled recording. The recipe starts from the bundled detector, writes a model pair that fme
-//! loads, and reports P / R on the held-out part of the data before and after.
+//! The training recipes, where they need the training Python stack: `make -C training finetune
+//! DATA=DIR` (docs/training.md "Train on your own cage") on tiny labelled folders in the two layouts
+//! CVAT exports, "MOT 1.1" (`img1/` + `gt/gt.txt`, no seqinfo.ini) and "YOLO 1.1" (`obj_train_data/`
+//! with a label file beside each image), made from frames of the bundled recording: the recipe
+//! starts from the bundled detector, writes a model pair that fme loads, and reports P / R on the
+//! held-out part of the data before and after. Also the real-fish recipe's fish zoom and its score
+//! calibration for the tracker (`training/calibrate.py`).
 //!
 //! Needs the training Python stack that `make test` installs first (`make setup-training`,
 //! FME_TRAINING_VENV or /tmp/venv-infer); without it the test fails and says so.
@@ -137,4 +139,92 @@ fn finetune_names_a_missing_data_folder() {
     assert!(!run.status.success());
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(err.contains("no-such-recording") && err.contains("does not exist"), "{err}");
+}
+
+/// The recipe's `--fish-zoom` augmentation (`det.zoom_to_fish`): a window around one fish, scaled so
+/// that its long side lands in 64-320 px (at most 6x); the fish's box follows its pixels; frames with
+/// no fish it may enlarge are left alone.
+#[test]
+fn fish_zoom_enlarges_one_whole_fish_and_moves_its_box_with_it() {
+    let venv = venv();
+    let script = r#"
+import numpy as np, det
+rng = np.random.default_rng(0)
+img = np.zeros((288, 480, 3), np.uint8)
+img[100:112, 200:230] = 255                      # a 30 x 12 px fish
+img[20:26, 20:30] = 128                          # a 10 px fish: too small to enlarge
+boxes = np.array([[200, 100, 30, 12, 1.0], [20, 20, 10, 6, 1.0]], np.float32)
+longs = []
+for _ in range(100):
+    out, b, cut = det.zoom_to_fish(img, boxes, rng)
+    x, y, w, h = b[0, :4]
+    longs.append(max(w, h))
+    assert 63.9 <= max(w, h) <= 180.1, b[0]     # 64-320 px, at most 6 x 30 px
+    assert not cut[0] and x >= -1 and y >= -1 and x + w <= 481 and y + h <= 289, b[0]
+    ys, xs = np.nonzero(out[:, :, 0] > 127)         # half-way between the fish and the water
+    assert abs(xs.min() - x) <= 1.5 and abs(xs.max() + 1 - (x + w)) <= 1.5, (xs.min(), xs.max(), b[0])
+    assert abs(ys.min() - y) <= 1.5 and abs(ys.max() + 1 - (y + h)) <= 1.5, (ys.min(), ys.max(), b[0])
+assert max(longs) - min(longs) > 60, (min(longs), max(longs))
+assert det.zoom_to_fish(img, boxes[1:], rng) is None
+assert det.zoom_to_fish(img, np.array([[200, 100, 30, 12, 0.1]], np.float32), rng) is None
+assert det.zoom_to_fish(img, np.zeros((0, 5), np.float32), rng) is None
+print("ok")
+"#;
+    let run = Command::new(venv.join("bin/python"))
+        .args(["-c", script])
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/training"))
+        .env("FME_NET", "480x288")
+        .output()
+        .expect("python runs");
+    let log = format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
+    assert!(run.status.success() && log.contains("ok"), "{log}");
+}
+
+/// `training/calibrate.py`: the score map for the tracker keeps every box fme finds at its confidence
+/// threshold (the same detections on the recording), its fit recovers a known map, and a calibrated
+/// file is not calibrated twice.
+#[test]
+fn score_calibration_keeps_the_detections_and_its_fit_recovers_a_known_map() {
+    let venv = venv();
+    let tmp = tempfile::tempdir().unwrap();
+    let cal = tmp.path().join("cal_int8.onnx");
+    let training = concat!(env!("CARGO_MANIFEST_DIR"), "/training");
+    let bundled = concat!(env!("CARGO_MANIFEST_DIR"), "/models/fish_det_int8.onnx");
+    let renders = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data");
+    let py = |args: &[&str]| {
+        let run = Command::new(venv.join("bin/python"))
+            .args(args)
+            .current_dir(training)
+            .env("FME_NET", "480x288")
+            .output()
+            .expect("python runs");
+        let log = format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
+        (run.status.success(), log)
+    };
+    let c = cal.to_str().unwrap();
+    let (ok, log) = py(&["calibrate.py", bundled, c, "--renders", renders, "--slope", "1.6"]);
+    assert!(ok, "calibrate.py: {log}");
+    // Mapping the calibrated file back onto the bundled one's scores takes the inverse slope.
+    let fit = format!(
+        "import calibrate, data\nims, b, _, _ = data.load_many({renders:?}, every=5, with_depth=False)\n\
+         a, r = calibrate.fit({c:?}, ims, b, 0.3, {bundled:?})\nassert abs(a - 1 / 1.6) < 0.01, r\n\
+         assert calibrate.score_map_of({c:?}) == (1.6, 0.3)\nprint('ok')"
+    );
+    let (ok, log) = py(&["-c", &fit]);
+    assert!(ok && log.contains("ok"), "{log}");
+    let (ok, log) = py(&["calibrate.py", c, tmp.path().join("twice.onnx").to_str().unwrap(), "--renders", renders]);
+    assert!(!ok && log.contains("already calibrated"), "{log}");
+
+    let detection = |model: &str| {
+        let eval = Command::new(env!("CARGO_BIN_EXE_fme"))
+            .args(["eval", "--sequence", REC, "--boxes", "model", "--depth", "gt", "--json", "--det-model", model])
+            .output()
+            .unwrap();
+        assert!(eval.status.success(), "fme eval {model}: {}", String::from_utf8_lossy(&eval.stderr));
+        let r: serde_json::Value = serde_json::from_slice(&eval.stdout).unwrap();
+        r["detection"].clone()
+    };
+    let (before, after) = (detection(bundled), detection(c));
+    assert!(before["tp"].as_u64().unwrap_or(0) > 0, "{before}");
+    assert_eq!(before, after, "the map changed which boxes fme keeps");
 }

@@ -283,10 +283,12 @@ def run_log():
     return log, lines
 
 
-def finish(out, stem, res, log, log_lines, t0):
-    """The recipes' common end: keeps the faster int8 variant, writes OUT/metrics.json (with the torch
-    version and the log) and logs where the files are."""
+def finish(out, stem, res, log, log_lines, t0, then=None):
+    """The recipes' common end: keeps the faster int8 variant, runs `then()` (a last step on the kept
+    pair), writes OUT/metrics.json (with the torch version and the log) and logs where the files are."""
     pick(out, stem, res, log)
+    if then is not None:
+        then()
     res["torch"] = torch.__version__
     res["log"] = log_lines
     with open(os.path.join(out, "metrics.json"), "w") as f:

@@ -23,6 +23,7 @@ import time
 import numpy as np
 import torch
 
+import calibrate
 import data
 import det
 import evaluate
@@ -76,7 +77,11 @@ def main():
     ap.add_argument("--lr", type=float, default=None, help="default 2e-3 (3e-4 when fine-tuning)")
     ap.add_argument("--zoom", type=float, default=0.35, help="share of real frames enlarged (det.zoom_in)")
     ap.add_argument("--max-zoom", type=float, default=2.5)
+    ap.add_argument("--fish-zoom", type=float, default=0.0,
+                    help="a further share of frames enlarged around one fish (det.zoom_to_fish)")
     ap.add_argument("--nms-iou", type=float, default=0.5, help="as fme's [detector] nms_iou")
+    ap.add_argument("--conf", type=float, default=0.3,
+                    help="as fme's [detector] confidence: the score map's fixed point (calibrate.py)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--limit", type=int, default=0, help="at most N images per source (smoke tests)")
     args = ap.parse_args()
@@ -138,7 +143,8 @@ def main():
     lr = args.lr if args.lr is not None else (3e-4 if finetune else 2e-3)
     t1 = time.time()
     model, epochs_run = det.train(images, boxes, args.epochs, lr=lr, log=log, time_budget_s=args.budget_s, sub=2,
-                                  arch=args.arch, zoom=args.zoom, max_zoom=args.max_zoom, color=np.array(color),
+                                  arch=args.arch, zoom=args.zoom, max_zoom=args.max_zoom, fish_zoom=args.fish_zoom,
+                                  color=np.array(color),
                                   init=init, seed=args.seed, body_lr_mult=args.body_lr_mult,
                                   freeze_frac=args.freeze_frac, weights=args.weights,
                                   freeze_blocks=args.freeze_blocks)
@@ -148,7 +154,8 @@ def main():
            "autocast": ("bf16" if det.use_bf16() else "fp32") if args.arch not in det.PRETRAINED_ARCHS
            else ("bf16" if os.environ.get("FME_BF16") == "1" else "fp32"), "input": [data.NET_W, data.NET_H],
            "output_stride": model.stride, "arch": "finetuned" if finetune else args.arch,
-           "budget_s": args.budget_s, "zoom": args.zoom, "max_zoom": args.max_zoom, "float_stem": True,
+           "budget_s": args.budget_s, "zoom": args.zoom, "max_zoom": args.max_zoom,
+           "fish_zoom": args.fish_zoom, "float_stem": True,
            "params_m": round(sum(p.numel() for p in model.parameters()) / 1e6, 2),
            "data": {"real_train": {k: len(v[0]) for k, v in train_sets.items()},
                     "held_out": {k: len(v[0]) for k, v in val.items()}, "renders": synth_info,
@@ -173,7 +180,17 @@ def main():
     for tag, path in paths.items():
         res[tag] = {"size_mb": round(os.path.getsize(path) / 1e6, 2), "ms_1_thread": ms[1][path],
                     "ms_2_threads": ms[2][path], "quality": per_source_quality(path, val, args.nms_iou, log, tag)}
-    finish(args.out, "fish_det", res, log, log_lines, t0)
+    # After P / R: the map keeps every box and its order above fme's confidence, so they hold. A
+    # fine-tune keeps its base's map (the training graph has none).
+    then, base_map = None, calibrate.score_map_of(args.base) if finetune else None
+    if "renders" in val and not finetune:
+        def then():
+            res["score_map"] = calibrate.calibrate_pair(args.out, "fish_det", *val["renders"], conf=args.conf, log=log)
+    elif base_map is not None:
+        def then():
+            calibrate.map_pair(args.out, "fish_det", *base_map)
+            res["score_map"] = {"a": base_map[0], "conf": base_map[1], "from": os.path.basename(args.base)}
+    finish(args.out, "fish_det", res, log, log_lines, t0, then)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,185 @@
+#!/usr/bin/env python3
+"""Score calibration of a detector for fme's tracker: a copy of a detector ONNX file whose scores are
+mapped so that its true fish score as the bundled detector's do on the same held-out renders.
+
+fme's tracker starts a track only from a detection scoring `tracker.new_track_threshold` (0.8) or
+more, and treats `track_threshold` (0.5) as "high"; both were set with the bundled detector, whose
+true detections on the held-out renders score 0.86 at the median. A detector trained on real fish
+is less sure of itself (a median of 0.69 there for the pretrained candidates), so few of its fish
+ever start a track, whatever its precision and recall. The map is Platt's form on the score's logit,
+
+    s' = sigmoid(a * logit(s) + (1 - a) * logit(c)),
+
+with its fixed point at the detector's confidence threshold c (`detector.confidence`, 0.3): the
+boxes above c and their order are unchanged, so detection precision and recall at c are exactly
+the same, and only the scale the tracker reads moves. `a` matches the median logit of the true
+detections (IoU >= 0.5) on the held-out render sequences to the reference detector's. It is
+appended to the graph (the output keeps its [1, 5, N] layout, so the file stays a drop-in) and
+recorded in the file's metadata (`fme.score_map`).
+
+    FME_NET=480x288 python calibrate.py IN.onnx OUT.onnx [--ref ../models/fish_det_int8.onnx]
+        [--renders /tmp/fme-train-data/val] [--conf 0.3] [--slope A]
+"""
+import argparse
+import json
+import os
+
+import numpy as np
+import onnx
+from onnx import TensorProto, helper, numpy_helper
+
+import data
+import evaluate
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+EPS = 1e-6
+
+
+def logit(p):
+    p = np.clip(p, EPS, 1 - EPS)
+    return np.log(p) - np.log1p(-p)
+
+
+def true_scores(path, images, boxes, conf, nms_iou=0.5):
+    """Scores of the detections (at `conf` and above) that match a true box at IoU 0.5."""
+    sess = evaluate.session(path, threads=2)
+    name = sess.get_inputs()[0].name
+    out = []
+    for img, g in zip(images, boxes):
+        raw = sess.run(None, {name: img.astype(np.float32).transpose(2, 0, 1)[None] / 255.0})[0]
+        d, sc = evaluate.decode(raw, conf, nms_iou)
+        gt = evaluate.clip_gt(g)
+        for di, s in zip(d, sc):
+            if len(gt) and (evaluate.iou_one(di, gt[:, :4]) >= 0.5).any():
+                out.append(s)
+    return np.array(out, np.float64)
+
+
+def fit_slope(scores, ref_scores, conf):
+    """`a` that moves the median true-detection logit onto the reference's (1: already alike)."""
+    lc = float(logit(conf))
+    num, den = float(np.median(logit(ref_scores))) - lc, float(np.median(logit(scores))) - lc
+    if len(scores) == 0 or den <= 0 or num <= 0:
+        raise SystemExit("calibrate: no true detections above the threshold to fit on")
+    return num / den
+
+
+def apply_map(scores, a, conf):
+    """The map in numpy, as the graph computes it."""
+    return 1.0 / (1.0 + np.exp(-(a * logit(scores) + (1 - a) * logit(conf))))
+
+
+def append_map(src, dst, a, conf, note):
+    """Writes `src` with the map on row 4 (the score) of its [1, 5, N] output."""
+    m = onnx.load(src)
+    g = m.graph
+    out = g.output[0]
+    raw = out.name + "_uncalibrated"
+    for n in g.node:
+        n.output[:] = [raw if o == out.name else o for o in n.output]
+        n.input[:] = [raw if i == out.name else i for i in n.input]
+    c = lambda name, v, dt=np.float32: numpy_helper.from_array(np.asarray(v, dt), name)
+    g.initializer.extend([c("cal_split", [4, 1], np.int64), c("cal_lo", EPS), c("cal_hi", 1 - EPS), c("cal_one", 1.0),
+                          c("cal_a", a), c("cal_b", (1 - a) * float(logit(conf)))])
+    nodes = [
+        helper.make_node("Split", [raw, "cal_split"], ["cal_boxes", "cal_s"], axis=1),
+        helper.make_node("Clip", ["cal_s", "cal_lo", "cal_hi"], ["cal_sc"]),
+        helper.make_node("Log", ["cal_sc"], ["cal_log_s"]),
+        helper.make_node("Sub", ["cal_one", "cal_sc"], ["cal_1ms"]),
+        helper.make_node("Log", ["cal_1ms"], ["cal_log_1ms"]),
+        helper.make_node("Sub", ["cal_log_s", "cal_log_1ms"], ["cal_logit"]),
+        helper.make_node("Mul", ["cal_logit", "cal_a"], ["cal_ax"]),
+        helper.make_node("Add", ["cal_ax", "cal_b"], ["cal_z"]),
+        helper.make_node("Sigmoid", ["cal_z"], ["cal_s2"]),
+        helper.make_node("Concat", ["cal_boxes", "cal_s2"], [out.name], axis=1),
+    ]
+    g.node.extend(nodes)
+    dims = [d.dim_value for d in out.type.tensor_type.shape.dim]
+    g.value_info.append(helper.make_tensor_value_info(raw, TensorProto.FLOAT, dims))
+    props = {p.key: p.value for p in m.metadata_props}
+    if "fme.score_map" in props:
+        raise SystemExit(f"calibrate: {src} is already calibrated ({props['fme.score_map']})")
+    onnx.helper.set_model_props(m, {**props, "fme.score_map": note})
+    onnx.checker.check_model(m)
+    onnx.save(m, dst)
+
+
+def fit(path, images, boxes, conf, ref):
+    """`a` for `path` against `ref` on the given held-out frames, and a report of both."""
+    s = true_scores(path, images, boxes, conf)
+    r = true_scores(ref, images, boxes, conf)
+    a = fit_slope(s, r, conf)
+    after = apply_map(s, a, conf)
+    share = lambda v: round(float((v >= 0.8).mean()), 3)
+    return a, {"a": round(a, 4), "b": round((1 - a) * float(logit(conf)), 4), "conf": conf,
+               "reference": {"file": os.path.basename(ref), "median": round(float(np.median(r)), 3),
+                             "share_ge_0_8": share(r)},
+               "true_detections": int(len(s)),
+               "before": {"median": round(float(np.median(s)), 3), "share_ge_0_8": share(s)},
+               "after": {"median": round(float(np.median(after)), 3), "share_ge_0_8": share(after)}}
+
+
+def note_of(a, conf):
+    return f"sigmoid({a:.4f} * logit(s) + {(1 - a) * float(logit(conf)):.4f}), fixed at {conf}"
+
+
+def score_map_of(path):
+    """(a, conf) of a calibrated file's map (its `fme.score_map` note), or None."""
+    props = {p.key: p.value for p in onnx.load(path, load_external_data=False).metadata_props}
+    note = props.get("fme.score_map")
+    if note is None:
+        return None
+    a = float(note.split("sigmoid(")[1].split(" ")[0])
+    return a, float(note.rsplit("fixed at ", 1)[1])
+
+
+def map_pair(out_dir, stem, a, conf):
+    """The map appended to OUT/STEM_{int8,fp32}.onnx in place; the uncalibrated files are kept as
+    STEM_{int8,fp32}_uncalibrated.onnx (what `train_real.py --init` may go on from)."""
+    for kind in ("int8", "fp32"):
+        path = os.path.join(out_dir, f"{stem}_{kind}.onnx")
+        raw = os.path.join(out_dir, f"{stem}_{kind}_uncalibrated.onnx")
+        os.replace(path, raw)
+        append_map(raw, path, a, conf, note_of(a, conf))
+
+
+def calibrate_pair(out_dir, stem, images, boxes, conf=0.3, ref=None, log=print):
+    """The recipe's last step: `a` fitted on OUT/STEM_int8.onnx (the shipped file) and appended to
+    the pair (`map_pair`). Returns the report for metrics.json."""
+    ref = ref or os.path.join(HERE, "..", "models", f"{stem}_int8.onnx")
+    a, report = fit(os.path.join(out_dir, f"{stem}_int8.onnx"), images, boxes, conf, ref)
+    map_pair(out_dir, stem, a, conf)
+    log(f"calibrate: a = {a:.3f}; true detections on the held-out renders: median score "
+        f"{report['before']['median']} -> {report['after']['median']} (reference {report['reference']['median']}), "
+        f"share >= 0.8 {report['before']['share_ge_0_8']} -> {report['after']['share_ge_0_8']}")
+    return report
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("model")
+    ap.add_argument("out")
+    ap.add_argument("--ref", default=os.path.join(HERE, "..", "models", "fish_det_int8.onnx"))
+    ap.add_argument("--renders", default="/tmp/fme-train-data/val", help="held-out render sequences")
+    ap.add_argument("--conf", type=float, default=0.3, help="as fme's [detector] confidence: the map's fixed point")
+    ap.add_argument("--slope", type=float, default=None, help="use this `a` instead of fitting it")
+    args = ap.parse_args()
+    if score_map_of(args.model) is not None:
+        raise SystemExit(f"calibrate: {args.model} is already calibrated ({score_map_of(args.model)}); "
+                         "calibrate its *_uncalibrated.onnx")
+    images, boxes, _, seqs = data.load_many(args.renders, every=5, with_depth=False)
+    if args.slope is None:
+        a, report = fit(args.model, images, boxes, args.conf, args.ref)
+    else:
+        a, report = args.slope, {"a": args.slope, "conf": args.conf}
+    report["fitted_on"] = f"{len(seqs)} held-out render sequences, {len(images)} frames"
+    append_map(args.model, args.out, a, args.conf, note_of(a, args.conf))
+    s = true_scores(args.model, images, boxes, args.conf)
+    check = true_scores(args.out, images, boxes, args.conf)
+    if len(check) != len(s) or np.abs(check - apply_map(s, a, args.conf)).max() > 1e-3:
+        raise SystemExit(f"calibrate: {args.out} does not score as the map says ({len(check)} vs {len(s)} true detections)")
+    print(json.dumps(report, indent=1))
+
+
+if __name__ == "__main__":
+    main()
