@@ -207,7 +207,8 @@ fn score_calibration_keeps_the_detections_and_its_fit_recovers_a_known_map() {
     // Mapping the calibrated file back onto the bundled one's scores takes the inverse slope.
     let fit = format!(
         "import calibrate, data\nims, b, _, _ = data.load_many({renders:?}, every=5, with_depth=False)\n\
-         a, r = calibrate.fit({c:?}, ims, b, 0.3, {bundled:?})\nassert abs(a - 1 / 1.6) < 0.01, r\n\
+         s, r = (calibrate.true_scores(f, ims, b, 0.3) for f in ({c:?}, {bundled:?}))\n\
+         a, rep = calibrate.fit(s, r, 0.3)\nassert abs(a - 1 / 1.6) < 0.01, rep\n\
          assert calibrate.score_map_of({c:?}) == (1.6, 0.3)\nprint('ok')"
     );
     let (ok, log) = py(&["-c", &fit]);

@@ -33,6 +33,7 @@ import evaluate
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 EPS = 1e-6
+KEY = "fme.score_map"  # the map's metadata entry: {"a", "conf", "map"}
 
 
 def logit(p):
@@ -41,27 +42,33 @@ def logit(p):
 
 
 def true_scores(path, images, boxes, conf, nms_iou=0.5):
-    """Scores of the detections (at `conf` and above) that match a true box at IoU 0.5."""
+    """Scores of the detections (at `conf` and above) that are true positives by the P / R matching
+    (`evaluate.match_found`)."""
     sess = evaluate.session(path, threads=2)
     name = sess.get_inputs()[0].name
     out = []
     for img, g in zip(images, boxes):
-        raw = sess.run(None, {name: img.astype(np.float32).transpose(2, 0, 1)[None] / 255.0})[0]
-        d, sc = evaluate.decode(raw, conf, nms_iou)
-        gt = evaluate.clip_gt(g)
-        for di, s in zip(d, sc):
-            if len(gt) and (evaluate.iou_one(di, gt[:, :4]) >= 0.5).any():
-                out.append(s)
-    return np.array(out, np.float64)
+        d, sc = evaluate.decode(sess.run(None, {name: evaluate.det_input(img)})[0], conf, nms_iou)
+        out.append(sc[evaluate.match_found(d, evaluate.clip_gt(g))[4]])
+    return np.concatenate(out).astype(np.float64) if out else np.zeros(0)
 
 
-def fit_slope(scores, ref_scores, conf):
-    """`a` that moves the median true-detection logit onto the reference's (1: already alike)."""
+def fit(scores, ref_scores, conf):
+    """`a` that moves the median true-detection logit onto the reference's (1: already alike), and a
+    report of both. ValueError where there is nothing to fit on."""
     lc = float(logit(conf))
+    if len(scores) == 0 or len(ref_scores) == 0:
+        raise ValueError(f"no true detections at conf {conf} to fit on ({len(scores)}, reference {len(ref_scores)})")
     num, den = float(np.median(logit(ref_scores))) - lc, float(np.median(logit(scores))) - lc
-    if len(scores) == 0 or den <= 0 or num <= 0:
-        raise SystemExit("calibrate: no true detections above the threshold to fit on")
-    return num / den
+    if den <= 0 or num <= 0:
+        raise ValueError(f"the true detections' median score is not above conf {conf}")
+    a = num / den
+    after = apply_map(scores, a, conf)
+    share = lambda v: round(float((v >= 0.8).mean()), 3)
+    return a, {"a": round(a, 4), "b": round((1 - a) * lc, 4), "conf": conf, "true_detections": int(len(scores)),
+               "reference": {"median": round(float(np.median(ref_scores)), 3), "share_ge_0_8": share(ref_scores)},
+               "before": {"median": round(float(np.median(scores)), 3), "share_ge_0_8": share(scores)},
+               "after": {"median": round(float(np.median(after)), 3), "share_ge_0_8": share(after)}}
 
 
 def apply_map(scores, a, conf):
@@ -69,9 +76,13 @@ def apply_map(scores, a, conf):
     return 1.0 / (1.0 + np.exp(-(a * logit(scores) + (1 - a) * logit(conf))))
 
 
-def append_map(src, dst, a, conf, note):
+def append_map(src, dst, a, conf):
     """Writes `src` with the map on row 4 (the score) of its [1, 5, N] output."""
     m = onnx.load(src)
+    props = {p.key: p.value for p in m.metadata_props}
+    if KEY in props:
+        raise SystemExit(already_calibrated(src, props[KEY]))
+    b = (1 - a) * float(logit(conf))
     g = m.graph
     out = g.output[0]
     raw = out.name + "_uncalibrated"
@@ -80,7 +91,7 @@ def append_map(src, dst, a, conf, note):
         n.input[:] = [raw if i == out.name else i for i in n.input]
     c = lambda name, v, dt=np.float32: numpy_helper.from_array(np.asarray(v, dt), name)
     g.initializer.extend([c("cal_split", [4, 1], np.int64), c("cal_lo", EPS), c("cal_hi", 1 - EPS), c("cal_one", 1.0),
-                          c("cal_a", a), c("cal_b", (1 - a) * float(logit(conf)))])
+                          c("cal_a", a), c("cal_b", b)])
     nodes = [
         helper.make_node("Split", [raw, "cal_split"], ["cal_boxes", "cal_s"], axis=1),
         helper.make_node("Clip", ["cal_s", "cal_lo", "cal_hi"], ["cal_sc"]),
@@ -96,41 +107,26 @@ def append_map(src, dst, a, conf, note):
     g.node.extend(nodes)
     dims = [d.dim_value for d in out.type.tensor_type.shape.dim]
     g.value_info.append(helper.make_tensor_value_info(raw, TensorProto.FLOAT, dims))
-    props = {p.key: p.value for p in m.metadata_props}
-    if "fme.score_map" in props:
-        raise SystemExit(f"calibrate: {src} is already calibrated ({props['fme.score_map']})")
-    onnx.helper.set_model_props(m, {**props, "fme.score_map": note})
+    note = {"a": a, "conf": conf, "map": f"sigmoid({a:.4f} * logit(s) + {b:.4f})"}
+    onnx.helper.set_model_props(m, {**props, KEY: json.dumps(note)})
     onnx.checker.check_model(m)
     onnx.save(m, dst)
 
 
-def fit(path, images, boxes, conf, ref):
-    """`a` for `path` against `ref` on the given held-out frames, and a report of both."""
-    s = true_scores(path, images, boxes, conf)
-    r = true_scores(ref, images, boxes, conf)
-    a = fit_slope(s, r, conf)
-    after = apply_map(s, a, conf)
-    share = lambda v: round(float((v >= 0.8).mean()), 3)
-    return a, {"a": round(a, 4), "b": round((1 - a) * float(logit(conf)), 4), "conf": conf,
-               "reference": {"file": os.path.basename(ref), "median": round(float(np.median(r)), 3),
-                             "share_ge_0_8": share(r)},
-               "true_detections": int(len(s)),
-               "before": {"median": round(float(np.median(s)), 3), "share_ge_0_8": share(s)},
-               "after": {"median": round(float(np.median(after)), 3), "share_ge_0_8": share(after)}}
-
-
-def note_of(a, conf):
-    return f"sigmoid({a:.4f} * logit(s) + {(1 - a) * float(logit(conf)):.4f}), fixed at {conf}"
-
-
 def score_map_of(path):
-    """(a, conf) of a calibrated file's map (its `fme.score_map` note), or None."""
+    """(a, conf) of a calibrated file's map (its `fme.score_map` metadata), or None."""
     props = {p.key: p.value for p in onnx.load(path, load_external_data=False).metadata_props}
-    note = props.get("fme.score_map")
-    if note is None:
+    if KEY not in props:
         return None
-    a = float(note.split("sigmoid(")[1].split(" ")[0])
-    return a, float(note.rsplit("fixed at ", 1)[1])
+    try:
+        m = json.loads(props[KEY])
+        return float(m["a"]), float(m["conf"])
+    except (ValueError, KeyError, TypeError) as e:
+        raise SystemExit(f"calibrate: {path}: unreadable {KEY} metadata {props[KEY]!r} ({e})")
+
+
+def already_calibrated(path, note):
+    return f"calibrate: {path} is already calibrated ({note}); calibrate its *_uncalibrated.onnx"
 
 
 def map_pair(out_dir, stem, a, conf):
@@ -140,14 +136,21 @@ def map_pair(out_dir, stem, a, conf):
         path = os.path.join(out_dir, f"{stem}_{kind}.onnx")
         raw = os.path.join(out_dir, f"{stem}_{kind}_uncalibrated.onnx")
         os.replace(path, raw)
-        append_map(raw, path, a, conf, note_of(a, conf))
+        append_map(raw, path, a, conf)
 
 
 def calibrate_pair(out_dir, stem, images, boxes, conf=0.3, ref=None, log=print):
-    """The recipe's last step: `a` fitted on OUT/STEM_int8.onnx (the shipped file) and appended to
-    the pair (`map_pair`). Returns the report for metrics.json."""
+    """The recipe's last step: `a` fitted on OUT/STEM_int8.onnx (the shipped file) against `ref`
+    (default the bundled file) and appended to the pair (`map_pair`). Returns the report; where
+    nothing can be fitted (a detector that finds no fish yet) the pair stays as it is, and is said so."""
     ref = ref or os.path.join(HERE, "..", "models", f"{stem}_int8.onnx")
-    a, report = fit(os.path.join(out_dir, f"{stem}_int8.onnx"), images, boxes, conf, ref)
+    s = true_scores(os.path.join(out_dir, f"{stem}_int8.onnx"), images, boxes, conf)
+    try:
+        a, report = fit(s, true_scores(ref, images, boxes, conf), conf)
+    except ValueError as e:
+        log(f"calibrate: not calibrated: {e}")
+        return {"skipped": str(e)}
+    report["reference"]["file"] = os.path.basename(ref)
     map_pair(out_dir, stem, a, conf)
     log(f"calibrate: a = {a:.3f}; true detections on the held-out renders: median score "
         f"{report['before']['median']} -> {report['after']['median']} (reference {report['reference']['median']}), "
@@ -164,17 +167,20 @@ def main():
     ap.add_argument("--conf", type=float, default=0.3, help="as fme's [detector] confidence: the map's fixed point")
     ap.add_argument("--slope", type=float, default=None, help="use this `a` instead of fitting it")
     args = ap.parse_args()
-    if score_map_of(args.model) is not None:
-        raise SystemExit(f"calibrate: {args.model} is already calibrated ({score_map_of(args.model)}); "
-                         "calibrate its *_uncalibrated.onnx")
+    if (done := score_map_of(args.model)) is not None:  # before the slow part
+        raise SystemExit(already_calibrated(args.model, f"a, conf = {done}"))
     images, boxes, _, seqs = data.load_many(args.renders, every=5, with_depth=False)
+    s = true_scores(args.model, images, boxes, args.conf)
     if args.slope is None:
-        a, report = fit(args.model, images, boxes, args.conf, args.ref)
+        try:
+            a, report = fit(s, true_scores(args.ref, images, boxes, args.conf), args.conf)
+        except ValueError as e:
+            raise SystemExit(f"calibrate: {args.model}: {e}")
+        report["reference"]["file"] = os.path.basename(args.ref)
     else:
         a, report = args.slope, {"a": args.slope, "conf": args.conf}
     report["fitted_on"] = f"{len(seqs)} held-out render sequences, {len(images)} frames"
-    append_map(args.model, args.out, a, args.conf, note_of(a, args.conf))
-    s = true_scores(args.model, images, boxes, args.conf)
+    append_map(args.model, args.out, a, args.conf)
     check = true_scores(args.out, images, boxes, args.conf)
     if len(check) != len(s) or np.abs(check - apply_map(s, a, args.conf)).max() > 1e-3:
         raise SystemExit(f"calibrate: {args.out} does not score as the map says ({len(check)} vs {len(s)} true detections)")

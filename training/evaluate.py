@@ -84,16 +84,18 @@ def clip_gt(g, W=data.NET_W, H=data.NET_H):
 
 def match(dets, gt, thr=0.5):
     """Returns (tp, fp, fn) with don't-care GT (visibility < VIS_REQUIRED)."""
-    tp, fp, found, req = match_found(dets, gt, thr)
+    tp, fp, found, req, _ = match_found(dets, gt, thr)
     return tp, fp, int(req.sum() - found.sum())
 
 
 def match_found(dets, gt, thr=0.5):
-    """`match`'s greedy matching: (tp, fp, which required GT boxes were found, which are required)."""
+    """`match`'s greedy matching (in the detections' order, by score from `decode`): (tp, fp, which
+    required GT boxes were found, which are required, which detections are true positives)."""
     req = gt[:, 4] >= VIS_REQUIRED
     used = np.zeros(len(gt), bool)
+    hit = np.zeros(len(dets), bool)
     tp = fp = 0
-    for d in dets:
+    for i, d in enumerate(dets):
         if len(gt) == 0:
             fp += 1
             continue
@@ -103,7 +105,7 @@ def match_found(dets, gt, thr=0.5):
         cand_req = np.where(req, ious, -1)
         j = int(np.argmax(cand_req))
         if cand_req[j] >= thr:
-            used[j] = True
+            used[j] = hit[i] = True
             tp += 1
             continue
         cand = np.where(~req, ious, -1)
@@ -112,15 +114,19 @@ def match_found(dets, gt, thr=0.5):
             used[j] = True  # don't care
             continue
         fp += 1
-    return tp, fp, req & used, req
+    return tp, fp, req & used, req, hit
+
+
+def det_input(img):
+    """An HWC uint8 frame at the network's size as the detector's [1, 3, H, W] input in 0..1."""
+    return img.astype(np.float32).transpose(2, 0, 1)[None] / 255.0
 
 
 def eval_detector(sess, images, boxes, conf=0.25, iou=0.7):
     name = sess.get_inputs()[0].name
     tp = fp = fn = 0
     for img, g in zip(images, boxes):
-        x = (img.astype(np.float32).transpose(2, 0, 1)[None] / 255.0)
-        out = sess.run(None, {name: x})[0]
+        out = sess.run(None, {name: det_input(img)})[0]
         d, _ = decode(out, conf, iou)
         a, b, c = match(d, clip_gt(g))
         tp, fp, fn = tp + a, fp + b, fn + c
@@ -143,14 +149,13 @@ def eval_detector_confs(sess, images, boxes, confs, iou=0.7):
     n_size = np.zeros(len(SIZE_LABELS), int)
     hit_size = np.zeros((len(confs), len(SIZE_LABELS)), int)
     for img, g in zip(images, boxes):
-        x = (img.astype(np.float32).transpose(2, 0, 1)[None] / 255.0)
-        out = sess.run(None, {name: x})[0]
+        out = sess.run(None, {name: det_input(img)})[0]
         gt = clip_gt(g)
         size = np.searchsorted(SIZE_EDGES, np.maximum(gt[:, 2], gt[:, 3]), side="right")
         n_size += np.bincount(size[gt[:, 4] >= VIS_REQUIRED], minlength=len(SIZE_LABELS))
         for i, (c, k) in enumerate(zip(confs, counts)):
             d, _ = decode(out, c, iou)
-            a, b, found, req = match_found(d, gt)
+            a, b, found, req, _ = match_found(d, gt)
             k[0], k[1], k[2] = k[0] + a, k[1] + b, k[2] + int(req.sum() - found.sum())
             hit_size[i] += np.bincount(size[found], minlength=len(SIZE_LABELS))
     return [{"precision": tp / max(tp + fp, 1), "recall": tp / max(tp + fn, 1), "tp": tp, "fp": fp, "fn": fn,

@@ -180,17 +180,16 @@ def main():
     for tag, path in paths.items():
         res[tag] = {"size_mb": round(os.path.getsize(path) / 1e6, 2), "ms_1_thread": ms[1][path],
                     "ms_2_threads": ms[2][path], "quality": per_source_quality(path, val, args.nms_iou, log, tag)}
-    # After P / R: the map keeps every box and its order above fme's confidence, so they hold. A
-    # fine-tune keeps its base's map (the training graph has none).
-    then, base_map = None, calibrate.score_map_of(args.base) if finetune else None
-    if "renders" in val and not finetune:
-        def then():
+    def calibrate_scores():
+        # After P / R: the map keeps every box and its order above fme's confidence, so they hold. A
+        # fine-tune keeps its base's map (the training graph has none).
+        if not finetune and "renders" in val:
             res["score_map"] = calibrate.calibrate_pair(args.out, "fish_det", *val["renders"], conf=args.conf, log=log)
-    elif base_map is not None:
-        def then():
+        elif finetune and (base_map := calibrate.score_map_of(args.base)) is not None:
             calibrate.map_pair(args.out, "fish_det", *base_map)
             res["score_map"] = {"a": base_map[0], "conf": base_map[1], "from": os.path.basename(args.base)}
-    finish(args.out, "fish_det", res, log, log_lines, t0, then)
+
+    finish(args.out, "fish_det", res, log, log_lines, t0, calibrate_scores)
 
 
 if __name__ == "__main__":
