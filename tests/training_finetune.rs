@@ -181,8 +181,9 @@ print("ok")
 }
 
 /// `training/calibrate.py`: the score map for the tracker keeps every box fme finds at its confidence
-/// threshold (the same detections on the recording), its fit recovers a known map, and a calibrated
-/// file is not calibrated twice.
+/// threshold (the same detections on the recording), its fit recovers a known map, a reference
+/// detector of another input size sees the frames resized as fme feeds it (the same fish found), and a
+/// calibrated file is not calibrated twice.
 #[test]
 fn score_calibration_keeps_the_detections_and_its_fit_recovers_a_known_map() {
     let venv = venv();
@@ -209,7 +210,12 @@ fn score_calibration_keeps_the_detections_and_its_fit_recovers_a_known_map() {
         "import calibrate, data\nims, b, _, _ = data.load_many({renders:?}, every=5, with_depth=False)\n\
          s, r = (calibrate.true_scores(f, ims, b, 0.3) for f in ({c:?}, {bundled:?}))\n\
          a, rep = calibrate.fit(s, r, 0.3)\nassert abs(a - 1 / 1.6) < 0.01, rep\n\
-         assert calibrate.score_map_of({c:?}) == (1.6, 0.3)\nprint('ok')"
+         assert calibrate.score_map_of({c:?}) == (1.6, 0.3)\n\
+         import cv2, numpy as np\nk = np.array([416 / 480, 256 / 288, 416 / 480, 256 / 288, 1], np.float32)\n\
+         small = [cv2.resize(i, (416, 256), interpolation=cv2.INTER_AREA) for i in ims]\n\
+         r2 = calibrate.true_scores({bundled:?}, small, [g * k for g in b], 0.3)\n\
+         assert abs(len(r2) - len(r)) <= 0.05 * len(r) and abs(np.median(r2) - np.median(r)) < 0.03, (len(r2), len(r))\n\
+         print('ok')"
     );
     let (ok, log) = py(&["-c", &fit]);
     assert!(ok && log.contains("ok"), "{log}");

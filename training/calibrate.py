@@ -24,6 +24,7 @@ import argparse
 import json
 import os
 
+import cv2
 import numpy as np
 import onnx
 from onnx import TensorProto, helper, numpy_helper
@@ -45,12 +46,26 @@ def true_scores(path, images, boxes, conf, nms_iou=0.5):
     """Scores of the detections (at `conf` and above) that are true positives by the P / R matching
     (`evaluate.match_found`)."""
     sess = evaluate.session(path, threads=2)
-    name = sess.get_inputs()[0].name
+    inp = sess.get_inputs()[0]
+    h, w = inp.shape[2], inp.shape[3]
     out = []
     for img, g in zip(images, boxes):
-        d, sc = evaluate.decode(sess.run(None, {name: evaluate.det_input(img)})[0], conf, nms_iou)
-        out.append(sc[evaluate.match_found(d, evaluate.clip_gt(g))[4]])
+        img, g = at_size(img, g, w, h)
+        d, sc = evaluate.decode(sess.run(None, {inp.name: evaluate.det_input(img)})[0], conf, nms_iou)
+        out.append(sc[evaluate.match_found(d, evaluate.clip_gt(g, w, h))[4]])
     return np.concatenate(out).astype(np.float64) if out else np.zeros(0)
+
+
+def at_size(img, g, w, h):
+    """A frame and its boxes resized to a w x h network input, as fme feeds any detector (the whole
+    frame resized): the reference detector may take another input size than the one calibrated."""
+    ih, iw = img.shape[:2]
+    if (iw, ih) == (w, h):
+        return img, g
+    g = g.astype(np.float32).copy()
+    g[:, [0, 2]] *= w / iw
+    g[:, [1, 3]] *= h / ih
+    return cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA if w < iw else cv2.INTER_LINEAR), g
 
 
 def fit(scores, ref_scores, conf):

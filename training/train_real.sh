@@ -9,7 +9,8 @@
 # first stage's in OUT/stage1). To
 # bundle the result: copy both files into models/ and re-measure (docs/training.md "Real footage").
 # Environment: VENV, FME_BIN, DATA (renders, shared with train.sh), SYNTH_SEQS (render sequences,
-# default 240), ARCH (det.ARCHS, default full), NICE, TRAIN_ARGS (more train_real.py options).
+# default 240), ARCH (det.ARCHS, default full), NET (the network's input WxH, default 480x288), NICE,
+# TRAIN_ARGS (more train_real.py options).
 # ARCH=mnv2 (`make -C training real-mnv2`): the pretrained MobileNetV2 body (det.PRETRAINED_ARCHS;
 # pretrained.py fetches it from npm into FME_PRETRAINED, default /tmp/fme-pretrained, converts and
 # checks it), trained in one stage of BUDGET_S seconds (default 5,700); STAGE2_S (default 0 for it) adds a
@@ -28,6 +29,7 @@ SYNTH_SEQS=${SYNTH_SEQS:-240}
 ARCH=${ARCH:-full}
 NICE=${NICE:-10}
 FRAMES=${FRAMES:-24}
+NET=${NET:-480x288}
 [ -d "$REAL_DATA" ] || { echo "train_real.sh: REAL_DATA=$REAL_DATA: no such folder" >&2; exit 2; }
 VENV="$VENV" bash "$ROOT/scripts/setup_training.sh"
 # shellcheck source=render.sh
@@ -35,7 +37,7 @@ source "$HERE/render.sh"
 real_recipe_renders "$SYNTH_SEQS"
 cd "$HERE"
 train() {
-  FME_NET=480x288 nice -n "$NICE" "$VENV/bin/python" train_real.py --real "$REAL_DATA" --synth "$DATA" \
+  FME_NET="$NET" nice -n "$NICE" "$VENV/bin/python" train_real.py --real "$REAL_DATA" --synth "$DATA" \
     --synth-seqs "$SYNTH_SEQS" --arch "$ARCH" "$@" ${TRAIN_ARGS:-}
 }
 case "$ARCH" in
