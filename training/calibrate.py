@@ -24,7 +24,6 @@ import argparse
 import json
 import os
 
-import cv2
 import numpy as np
 import onnx
 from onnx import TensorProto, helper, numpy_helper
@@ -57,15 +56,13 @@ def true_scores(path, images, boxes, conf, nms_iou=0.5):
 
 
 def at_size(img, g, w, h):
-    """A frame and its boxes resized to a w x h network input, as fme feeds any detector (the whole
-    frame resized): the reference detector may take another input size than the one calibrated."""
+    """A network-input frame and its boxes letterboxed again to a w x h input, as fme would feed that
+    detector (`data.letterbox`): the reference detector may take another input size."""
     ih, iw = img.shape[:2]
     if (iw, ih) == (w, h):
         return img, g
-    g = g.astype(np.float32).copy()
-    g[:, [0, 2]] *= w / iw
-    g[:, [1, 3]] *= h / ih
-    return cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA if w < iw else cv2.INTER_LINEAR), g
+    gain, _nw, _nh, padx, pady = data.letterbox_params(iw, ih, w, h)
+    return data.letterbox(img, w, h), data.boxes_to_net(g.astype(np.float32), (gain, padx, pady))
 
 
 def fit(scores, ref_scores, conf):

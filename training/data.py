@@ -37,18 +37,22 @@ def list_sequences(root):
     return sorted(out)
 
 
-def letterbox_params(w, h):
-    gain = min(NET_W / w, NET_H / h)
+def letterbox_params(w, h, net_w=None, net_h=None):
+    """(gain, nw, nh, padx, pady) of a w x h image letterboxed to the network input (NET_W x NET_H
+    unless given), as fme does."""
+    net_w, net_h = net_w or NET_W, net_h or NET_H
+    gain = min(net_w / w, net_h / h)
     nw, nh = round(w * gain), round(h * gain)
-    padx = round((NET_W - nw) / 2 - 0.1)
-    pady = round((NET_H - nh) / 2 - 0.1)
+    padx = round((net_w - nw) / 2 - 0.1)
+    pady = round((net_h - nh) / 2 - 0.1)
     return gain, nw, nh, padx, pady
 
 
-def letterbox(img_rgb):
+def letterbox(img_rgb, net_w=None, net_h=None):
     h, w = img_rgb.shape[:2]
-    gain, nw, nh, padx, pady = letterbox_params(w, h)
-    out = np.full((NET_H, NET_W, 3), 114, np.uint8)
+    net_w, net_h = net_w or NET_W, net_h or NET_H
+    gain, nw, nh, padx, pady = letterbox_params(w, h, net_w, net_h)
+    out = np.full((net_h, net_w, 3), 114, np.uint8)
     out[pady:pady + nh, padx:padx + nw] = cv2.resize(img_rgb, (nw, nh), interpolation=cv2.INTER_LINEAR)
     return out
 
