@@ -27,6 +27,18 @@ fn venv() -> PathBuf {
     v
 }
 
+/// The training venv's Python in `training/` at the recipes' 480x288 input: (success, stdout + stderr).
+fn training_py(args: &[&str]) -> (bool, String) {
+    let run = Command::new(venv().join("bin/python"))
+        .args(args)
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/training"))
+        .env("FME_NET", "480x288")
+        .output()
+        .expect("python runs");
+    let log = format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
+    (run.status.success(), log)
+}
+
 /// gt rows of the recording by frame: (x, y, w, h) of the fish at least half visible.
 fn gt_rows() -> Vec<(u32, String)> {
     let text = fs::read_to_string(Path::new(REC).join("gt/gt.txt")).expect("recording gt");
@@ -146,7 +158,6 @@ fn finetune_names_a_missing_data_folder() {
 /// no fish it may enlarge are left alone.
 #[test]
 fn fish_zoom_enlarges_one_whole_fish_and_moves_its_box_with_it() {
-    let venv = venv();
     let script = r#"
 import numpy as np, det
 rng = np.random.default_rng(0)
@@ -170,40 +181,22 @@ assert det.zoom_to_fish(img, np.array([[200, 100, 30, 12, 0.1]], np.float32), rn
 assert det.zoom_to_fish(img, np.zeros((0, 5), np.float32), rng) is None
 print("ok")
 "#;
-    let run = Command::new(venv.join("bin/python"))
-        .args(["-c", script])
-        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/training"))
-        .env("FME_NET", "480x288")
-        .output()
-        .expect("python runs");
-    let log = format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
-    assert!(run.status.success() && log.contains("ok"), "{log}");
+    let (ok, log) = training_py(&["-c", script]);
+    assert!(ok && log.contains("ok"), "{log}");
 }
 
 /// `training/calibrate.py`: the score map for the tracker keeps every box fme finds at its confidence
 /// threshold (the same detections on the recording), its fit recovers a known map, a reference
-/// detector of another input size sees the frames resized as fme feeds it (the same fish found), and a
-/// calibrated file is not calibrated twice.
+/// detector of another input size is fed the frames letterboxed to its own (the same fish found), and
+/// a calibrated file is not calibrated twice.
 #[test]
 fn score_calibration_keeps_the_detections_and_its_fit_recovers_a_known_map() {
-    let venv = venv();
     let tmp = tempfile::tempdir().unwrap();
     let cal = tmp.path().join("cal_int8.onnx");
-    let training = concat!(env!("CARGO_MANIFEST_DIR"), "/training");
     let bundled = concat!(env!("CARGO_MANIFEST_DIR"), "/models/fish_det_int8.onnx");
     let renders = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data");
-    let py = |args: &[&str]| {
-        let run = Command::new(venv.join("bin/python"))
-            .args(args)
-            .current_dir(training)
-            .env("FME_NET", "480x288")
-            .output()
-            .expect("python runs");
-        let log = format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
-        (run.status.success(), log)
-    };
     let c = cal.to_str().unwrap();
-    let (ok, log) = py(&["calibrate.py", bundled, c, "--renders", renders, "--slope", "1.6"]);
+    let (ok, log) = training_py(&["calibrate.py", bundled, c, "--renders", renders, "--slope", "1.6"]);
     assert!(ok, "calibrate.py: {log}");
     // Mapping the calibrated file back onto the bundled one's scores takes the inverse slope.
     let fit = format!(
@@ -217,9 +210,10 @@ fn score_calibration_keeps_the_detections_and_its_fit_recovers_a_known_map() {
          assert abs(len(r2) - len(r)) <= 0.05 * len(r) and abs(np.median(r2) - np.median(r)) < 0.03, (len(r2), len(r))\n\
          print('ok')"
     );
-    let (ok, log) = py(&["-c", &fit]);
+    let (ok, log) = training_py(&["-c", &fit]);
     assert!(ok && log.contains("ok"), "{log}");
-    let (ok, log) = py(&["calibrate.py", c, tmp.path().join("twice.onnx").to_str().unwrap(), "--renders", renders]);
+    let (ok, log) =
+        training_py(&["calibrate.py", c, tmp.path().join("twice.onnx").to_str().unwrap(), "--renders", renders]);
     assert!(!ok && log.contains("already calibrated"), "{log}");
 
     let detection = |model: &str| {
