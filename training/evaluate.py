@@ -143,9 +143,11 @@ def eval_detector_confs(sess, images, boxes, confs, iou=0.7):
     """`eval_detector` at each of `confs`, the network run once per image (the same numbers), each
     with `by_size`: [label, required true boxes, recall] by the box's long side (SIZE_EDGES). The
     aggregate hides which fish a detector misses; real tanks and cages show fish longer than 128 px,
-    which the training images rarely have."""
+    which the training images rarely have. And `geometry` (`box_geometry`): how the boxes are drawn,
+    which moves the activity through the fish ruler even where P / R hold."""
     name = sess.get_inputs()[0].name
     counts = [[0, 0, 0] for _ in confs]
+    geo = [Geometry() for _ in confs]
     n_size = np.zeros(len(SIZE_LABELS), int)
     hit_size = np.zeros((len(confs), len(SIZE_LABELS)), int)
     for img, g in zip(images, boxes):
@@ -155,13 +157,56 @@ def eval_detector_confs(sess, images, boxes, confs, iou=0.7):
         n_size += np.bincount(size[gt[:, 4] >= VIS_REQUIRED], minlength=len(SIZE_LABELS))
         for i, (c, k) in enumerate(zip(confs, counts)):
             d, _ = decode(out, c, iou)
-            a, b, found, req, _ = match_found(d, gt)
+            a, b, found, req, hit = match_found(d, gt)
             k[0], k[1], k[2] = k[0] + a, k[1] + b, k[2] + int(req.sum() - found.sum())
             hit_size[i] += np.bincount(size[found], minlength=len(SIZE_LABELS))
+            geo[i].add(d, hit, gt)
     return [{"precision": tp / max(tp + fp, 1), "recall": tp / max(tp + fn, 1), "tp": tp, "fp": fp, "fn": fn,
              "conf": c, "by_size": [[lab, int(n), float(h / n) if n else None]
-                                    for lab, n, h in zip(SIZE_LABELS, n_size, hits)]}
-            for c, (tp, fp, fn), hits in zip(confs, counts, hit_size)]
+                                    for lab, n, h in zip(SIZE_LABELS, n_size, hits)],
+             "geometry": g.summary()}
+            for c, (tp, fp, fn), hits, g in zip(confs, counts, hit_size, geo)]
+
+
+class Geometry:
+    """How a detector draws its boxes against the true ones. The activity with the fish as the ruler
+    scales with the boxes' size (a box 1.3x the fish reads the fish 1.3x nearer, its speed 1/1.3),
+    so a detector can hold P / R and still move the index (docs/lab-notes, "box geometry"):
+    - `long_ratio`: median long side of a true-positive box over its true box's (IoU 0.5 allows
+      about 0.7-1.4);
+    - `merged`: share of false positives holding the centres of two or more true boxes (one box
+      over fish that overlap: too long, too slow);
+    - `fragment`: share of false positives at least 70 % inside one true box and under half its area
+      (a head, tail or flank: too short, too fast)."""
+
+    def __init__(self):
+        self.ratios, self.fp, self.merged, self.fragment = [], 0, 0, 0
+
+    def add(self, dets, hit, gt):
+        if len(gt) == 0:
+            self.fp += len(dets)
+            return
+        cx, cy = gt[:, 0] + gt[:, 2] / 2, gt[:, 1] + gt[:, 3] / 2
+        for d, h in zip(dets, hit):
+            if h:
+                j = int(np.argmax(iou_one(d, gt[:, :4])))
+                self.ratios.append(max(d[2], d[3]) / max(gt[j, 2], gt[j, 3]))
+                continue
+            self.fp += 1
+            inside = (cx >= d[0]) & (cx <= d[0] + d[2]) & (cy >= d[1]) & (cy <= d[1] + d[3])
+            if inside.sum() >= 2:
+                self.merged += 1
+                continue
+            w = np.clip(np.minimum(d[0] + d[2], gt[:, 0] + gt[:, 2]) - np.maximum(d[0], gt[:, 0]), 0, None)
+            h_ = np.clip(np.minimum(d[1] + d[3], gt[:, 1] + gt[:, 3]) - np.maximum(d[1], gt[:, 1]), 0, None)
+            share = w * h_ / max(d[2] * d[3], 1e-9)
+            if ((share >= 0.7) & (d[2] * d[3] < 0.5 * gt[:, 2] * gt[:, 3])).any():
+                self.fragment += 1
+
+    def summary(self):
+        return {"long_ratio": float(np.median(self.ratios)) if self.ratios else None,
+                "merged": self.merged / self.fp if self.fp else None,
+                "fragment": self.fragment / self.fp if self.fp else None}
 
 
 def sweep_conf(sess, images, boxes, confs=(0.2, 0.25, 0.3, 0.35, 0.4, 0.5)):

@@ -37,6 +37,10 @@ CONFS = (0.2, 0.25, 0.3, 0.35, 0.4, 0.5)
 REPEAT = {"aquarium": 2, "zebrafish-lab": 3}
 
 
+def fmt(x):
+    return "-" if x is None else f"{x:.2f}"
+
+
 def per_source_quality(path, val, nms_iou, log, tag):
     """{source: [P/R per confidence]} of one ONNX file on each held-out split."""
     sess = evaluate.session(path)
@@ -51,6 +55,9 @@ def per_source_quality(path, val, nms_iou, log, tag):
                                           for c in (0.25, 0.3, 0.4)))
         log(f"{tag} {name}: recall at conf 0.3 by long side (px, n): " + ", ".join(
             f"{lab} ({k}) {'-' if r is None else f'{r:.2f}'}" for lab, k, r in at[0.3]["by_size"]))
+        g = at[0.3]["geometry"]
+        log(f"{tag} {name}: boxes at conf 0.3: long side / true {fmt(g['long_ratio'])}, false positives "
+            f"over 2+ fish {fmt(g['merged'])}, inside one fish {fmt(g['fragment'])}")
     return out
 
 
@@ -59,6 +66,9 @@ def main():
     ap.add_argument("--real", default=os.environ.get("REAL_DATA", os.path.join(HERE, "..", "..", "shared", "realfish", "train")))
     ap.add_argument("--synth", default="", help="folder with train/ and val/ fme sequences (renders); empty: none")
     ap.add_argument("--synth-seqs", type=int, default=240, help="training render sequences used")
+    ap.add_argument("--close-seqs", type=int, default=0,
+                    help="close-fish render sequences used (SYNTH/close-train, render.sh gen_close; their "
+                         "held-out SYNTH/close-val is scored as `renders-close`)")
     ap.add_argument("--finetune", nargs="*", default=None, help="fine-tune on these folders instead")
     ap.add_argument("--base", default=os.path.join(HERE, "..", "models", "fish_det_fp32.onnx"))
     ap.add_argument("--init", default="", help="an fp32 detector to go on training from (the recipe's second stage)")
@@ -130,6 +140,17 @@ def main():
         val["renders"] = (v_imgs, v_boxes)
         synth_info = {"train_sequences": len(s_seqs), "train_frames": int(len(s_imgs)),
                       "val_sequences": len(v_seqs), "val_frames": int(len(v_imgs))}
+        if args.close_seqs > 0:
+            c_imgs, c_boxes, _, c_seqs = data.load_many(os.path.join(args.synth, "close-train"), every=3,
+                                                        with_depth=False, limit=args.close_seqs)
+            imgs.append(c_imgs)
+            boxes.extend(c_boxes)
+            color.extend([False] * len(c_imgs))
+            cv_imgs, cv_boxes, _, cv_seqs = data.load_many(os.path.join(args.synth, "close-val"), every=3,
+                                                           with_depth=False)
+            val["renders-close"] = (cv_imgs, cv_boxes)
+            synth_info["close"] = {"train_sequences": len(c_seqs), "train_frames": int(len(c_imgs)),
+                                   "val_sequences": len(cv_seqs), "val_frames": int(len(cv_imgs))}
     images = np.concatenate(imgs)
     log(f"data: {n_real} real training images ({', '.join(f'{k} {len(v[0])}' for k, v in train_sets.items())}), "
         f"{len(images) - n_real} renders; held out: {', '.join(f'{k} {len(v[0])}' for k, v in val.items())} "

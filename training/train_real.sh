@@ -9,7 +9,8 @@
 # first stage's in OUT/stage1). To
 # bundle the result: copy both files into models/ and re-measure (docs/training.md "Real footage").
 # Environment: VENV, FME_BIN, DATA (renders, shared with train.sh), SYNTH_SEQS (render sequences,
-# default 240), ARCH (det.ARCHS, default full), NET (the network's input WxH, default 480x288), NICE,
+# default 240), CLOSE_SEQS (close-fish render sequences, render.sh gen_close, default 80; 0: none),
+# ARCH (det.ARCHS, default full), NET (the network's input WxH, default 480x288), NICE,
 # TRAIN_ARGS (more train_real.py options).
 # ARCH=mnv2 (`make -C training real-mnv2`): the pretrained MobileNetV2 body (det.PRETRAINED_ARCHS;
 # pretrained.py fetches it from npm into FME_PRETRAINED, default /tmp/fme-pretrained, converts and
@@ -26,6 +27,7 @@ case "${ARCH:-full}" in mnv2*) BUDGET_S=${BUDGET_S:-5700} STAGE2_S=${STAGE2_S:-0
 BUDGET_S=${BUDGET_S:-4200}
 STAGE2_S=${STAGE2_S:-2700}
 SYNTH_SEQS=${SYNTH_SEQS:-240}
+CLOSE_SEQS=${CLOSE_SEQS:-80}
 ARCH=${ARCH:-full}
 NICE=${NICE:-10}
 FRAMES=${FRAMES:-24}
@@ -34,11 +36,11 @@ NET=${NET:-480x288}
 VENV="$VENV" bash "$ROOT/scripts/setup_training.sh"
 # shellcheck source=render.sh
 source "$HERE/render.sh"
-real_recipe_renders "$SYNTH_SEQS"
+real_recipe_renders "$SYNTH_SEQS" "$CLOSE_SEQS"
 cd "$HERE"
 train() {
   FME_NET="$NET" nice -n "$NICE" "$VENV/bin/python" train_real.py --real "$REAL_DATA" --synth "$DATA" \
-    --synth-seqs "$SYNTH_SEQS" --arch "$ARCH" "$@" ${TRAIN_ARGS:-}
+    --synth-seqs "$SYNTH_SEQS" --close-seqs "$CLOSE_SEQS" --arch "$ARCH" "$@" ${TRAIN_ARGS:-}
 }
 case "$ARCH" in
   mnv2*)

@@ -39,6 +39,14 @@ pub const AUTO_MAX_RESIDUAL_M: f64 = 0.15;
 /// Fish rulers (plus references) a fit needs.
 pub const MIN_RULERS: usize = 3;
 
+/// The most a fish fit may put the fish nearer or farther than their sizes alone say: the median
+/// over the rulers of the fit's depth over [`ruler_depth`] must lie within `1/x..x`
+/// ([`keep_fish_sizes`]). On renders and real clips other than the evaluation sequence the fits
+/// stay within 0.9-1.25; with three or four rulers whose relative values nearly coincide, a
+/// two-pair fit can be so steep that the fish end up a few centimetres from the lens, and the
+/// 0.1 m inlier tolerance then keeps that fit.
+pub const MAX_OFF_SIZES: f64 = 2.0;
+
 /// Time constant of the averaging of the cohort's length measured under the references' fit
 /// ([`LengthLearner`]), s.
 pub const LEARNED_LENGTH_SMOOTHING_S: f64 = 10.0;
@@ -67,6 +75,26 @@ pub fn fit_rulers(pairs: &[ReferencePair], length_cv: f64) -> Result<ScaleShift,
         return Err(FitError::TooFewReferences { usable, needed: MIN_RULERS });
     }
     fit_robust(DepthModel::Inverse, pairs, Metres(0.1), (2.0 * length_cv).max(0.05))
+}
+
+/// The median over `by_size` (each ruler's pair from its angular length alone, [`Rulers::pair`]
+/// without a fit) of the fit's depth there over that pair's depth; NaN when none has a depth.
+pub fn depth_over_sizes(f: &ScaleShift, by_size: &[ReferencePair]) -> f64 {
+    let mut q: heapless::Vec<f64, { super::MAX_REFERENCES }> =
+        by_size.iter().filter_map(|p| f.depth(p.relative).map(|d| d.0 / p.depth.0)).collect();
+    q.sort_unstable_by(f64::total_cmp);
+    if q.is_empty() { f64::NAN } else { q[q.len() / 2] }
+}
+
+/// `f` when it keeps the fish within [`MAX_OFF_SIZES`] of the depths their sizes give (or there is
+/// nothing to compare with), else [`FitError::OffTheFishSizes`]. The fish fit corrects the
+/// angle-only scale with the depth network's ranking; it may not throw it away.
+pub fn keep_fish_sizes(f: ScaleShift, by_size: &[ReferencePair]) -> Result<ScaleShift, FitError> {
+    let q = depth_over_sizes(&f, by_size);
+    if q.is_finite() && !(1.0 / MAX_OFF_SIZES..=MAX_OFF_SIZES).contains(&q) {
+        return Err(FitError::OffTheFishSizes(q));
+    }
+    Ok(f)
 }
 
 /// One look at a fish in a depth frame.
@@ -303,6 +331,32 @@ mod tests {
             assert!((f.depth(r).unwrap().0 / d - 1.0).abs() < 0.05, "{d}: {f:?}");
         }
         assert!(matches!(fit_rulers(&pairs[..2], 0.1), Err(FitError::TooFewReferences { .. })));
+    }
+
+    #[test]
+    fn a_fit_that_moves_the_fish_far_off_their_sizes_is_refused() {
+        // Four rulers at 0.9-1.2 m by their sizes; relative values 1/D.
+        let by_size: heapless::Vec<ReferencePair, 32> =
+            [0.9, 1.0, 1.1, 1.2].iter().map(|&d| ReferencePair { relative: 1.0 / d, depth: Metres(d) }).collect();
+        let fit = |s: f64, t: f64| ScaleShift {
+            model: super::super::fit::DepthModel::Inverse,
+            s,
+            t,
+            residual_rms: Metres(0.0),
+            used: 4,
+            rejected: 0,
+        };
+        // The depth network's ranking corrects the sizes by 20 %: kept.
+        assert!(keep_fish_sizes(fit(1.0 / 1.2, 0.0), &by_size).is_ok());
+        assert!((depth_over_sizes(&fit(1.0 / 1.2, 0.0), &by_size) - 1.2).abs() < 1e-9);
+        // A steep two-pair fit (1/D = 60 R - 52: large scale, shift cancelling most of it) puts the
+        // fish at a few centimetres: refused, and so is one that sends them 3x as far.
+        let steep = fit(60.0, -52.0);
+        assert!(depth_over_sizes(&steep, &by_size) < 0.2);
+        assert!(matches!(keep_fish_sizes(steep, &by_size), Err(FitError::OffTheFishSizes(q)) if q < 0.2));
+        assert!(matches!(keep_fish_sizes(fit(1.0 / 3.0, 0.0), &by_size), Err(FitError::OffTheFishSizes(_))));
+        // Nothing to compare with: kept.
+        assert!(keep_fish_sizes(steep, &[]).is_ok());
     }
 
     #[test]

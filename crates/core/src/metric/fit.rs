@@ -49,6 +49,10 @@ pub enum FitError {
     /// The fit predicts a non-positive or non-finite depth at a reference it used.
     #[error("fit predicts a non-positive depth at a reference (relative inverse depth {0})")]
     NegativeDepth(f64),
+    /// A fish fit puts the fish this many times as far as their sizes alone say (fish.rs,
+    /// `MAX_OFF_SIZES`).
+    #[error("fish fit puts the fish at {0:.2} times the depth their sizes give")]
+    OffTheFishSizes(f64),
 }
 
 /// A fitted scale/shift model with its residual.
@@ -82,6 +86,28 @@ impl ScaleShift {
         };
         (d.is_finite() && d > 0.0).then_some(Metres(d))
     }
+}
+
+/// How strongly an inverse fit's depth follows the relative value at the median of the pairs it
+/// kept: `s r / (s r + t)`, the relative change of depth per relative change of `r` (1: no shift;
+/// 40: the shift cancels 97 % of `s r`, and a 1 % error in `r` moves the depth by 40 %). NaN for the
+/// linear model or without kept pairs.
+pub fn depth_gain(f: &ScaleShift, pairs: &[ReferencePair]) -> f64 {
+    if f.model != DepthModel::Inverse {
+        return f64::NAN;
+    }
+    let mut r: heapless::Vec<f64, MAX_REFERENCES> = pairs
+        .iter()
+        .enumerate()
+        .filter(|&(i, p)| usable(p) && (i >= 32 || f.rejected & (1 << i) == 0))
+        .map(|(_, p)| p.relative)
+        .collect();
+    if r.is_empty() {
+        return f64::NAN;
+    }
+    r.sort_unstable_by(f64::total_cmp);
+    let m = r[r.len() / 2];
+    f.s * m / (f.s * m + f.t)
 }
 
 fn usable(p: &ReferencePair) -> bool {
@@ -237,6 +263,25 @@ mod tests {
 
     fn refs_from(depths: &[f64], rel: impl Fn(f64) -> f64) -> References {
         depths.iter().map(|&d| ReferencePair { relative: rel(d), depth: Metres(d) }).collect()
+    }
+
+    #[test]
+    fn depth_gain_is_how_much_of_the_depth_the_relative_value_carries() {
+        let f = |s: f64, t: f64, rejected: u32| ScaleShift {
+            model: DepthModel::Inverse,
+            s,
+            t,
+            residual_rms: Metres(0.0),
+            used: 3,
+            rejected,
+        };
+        let pairs: Vec<ReferencePair> =
+            [1.0, 1.1, 1.2, 9.0].iter().map(|&r| ReferencePair { relative: r, depth: Metres(1.0) }).collect();
+        // No shift: depth follows 1/r exactly, gain 1.
+        assert!((depth_gain(&f(1.0, 0.0, 0), &pairs[..3]) - 1.0).abs() < 1e-12);
+        // 1/D = 40 R - 35 at the kept median R = 1.1: 44 / 9.
+        assert!((depth_gain(&f(40.0, -35.0, 0b1000), &pairs) - 44.0 / 9.0).abs() < 1e-12);
+        assert!(depth_gain(&f(1.0, 0.0, 0), &[]).is_nan());
     }
 
     #[test]

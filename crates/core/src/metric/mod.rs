@@ -25,7 +25,8 @@ mod scale;
 
 pub use fish::{
     AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, FISH_FIT_SMOOTHING_S, FitSmoother, LEARNED_LENGTH_SMOOTHING_S,
-    LENGTH_QUANTILE, LOOKS, LengthLearner, MIN_LOOKS, MIN_RULERS, RULER_TIMEOUT_S, Rulers, fit_rulers, ruler_depth,
+    LENGTH_QUANTILE, LOOKS, LengthLearner, MAX_OFF_SIZES, MIN_LOOKS, MIN_RULERS, RULER_TIMEOUT_S, Rulers,
+    depth_over_sizes, fit_rulers, keep_fish_sizes, ruler_depth,
 };
 pub use fit::{DepthModel, FitError, ROBUST_INLIER, ReferencePair, References, ScaleShift, fit, fit_robust};
 pub use grid::DepthGrid;

@@ -6,7 +6,8 @@
 
 use super::{
     AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, DepthFit, DepthGrid, DepthSample, DepthScale, FitMethod, FitSmoother,
-    LengthLearner, MapKind, ROBUST_INLIER, ReferencePoints, References, Rulers, fit_rulers, sample_fish,
+    LengthLearner, MapKind, ROBUST_INLIER, ReferencePoints, References, Rulers, depth_over_sizes, fit_rulers,
+    keep_fish_sizes, sample_fish,
 };
 use crate::geometry::{Intrinsics, PixelBox, apparent_length};
 use crate::units::Metres;
@@ -253,7 +254,7 @@ impl ScalePolicy {
         let learn = !fit && self.cfg.learn_length;
         let learned = self.learned_length.length().filter(|_| self.cfg.learn_length);
         let length = learned.unwrap_or(length);
-        let (pairs, rulers) = self.look_at_fish(t_s, map, intrinsics, length, &refs, fit, learn);
+        let (pairs, rulers, by_size) = self.look_at_fish(t_s, map, intrinsics, length, &refs, fit, learn);
         if learn {
             self.learned_length.commit(t_s);
         }
@@ -261,8 +262,19 @@ impl ScalePolicy {
             return;
         }
         self.state.references_visible = refs.len() as u32;
-        match fit_rulers(&pairs, self.cfg.body_length_cv) {
+        match fit_rulers(&pairs, self.cfg.body_length_cv).and_then(|f| keep_fish_sizes(f, &by_size)) {
             Ok(f) => {
+                tracing::debug!(
+                    t_s,
+                    s = f.s,
+                    t = f.t,
+                    pairs = pairs.len(),
+                    rejected = f.rejected.count_ones(),
+                    median_pair_m = median_depth(&pairs),
+                    gain = super::fit::depth_gain(&f, &pairs),
+                    over_sizes = depth_over_sizes(&f, &by_size),
+                    "fish fit"
+                );
                 let f = self.fish_fit.update(t_s, f);
                 self.stats.fits += 1;
                 self.stats.residual_sum_m += f.residual_rms.0;
@@ -283,13 +295,14 @@ impl ScalePolicy {
             }
             Err(e) => {
                 self.stats.failures += 1;
-                tracing::debug!("fish fit failed ({e}); keeping the previous fit");
+                tracing::debug!(t_s, pairs = pairs.len(), "fish fit failed ({e}); keeping the previous fit");
             }
         }
     }
 
     /// Records each fish seen at `t_s` as a ruler look (and its length, when `learn`); with `fit`,
-    /// returns `refs` with the rulers' pairs added, and how many rulers.
+    /// returns `refs` with the rulers' pairs added, how many rulers, and each ruler's pair from its
+    /// size alone (for [`keep_fish_sizes`]).
     #[allow(clippy::too_many_arguments)]
     fn look_at_fish(
         &mut self,
@@ -300,8 +313,9 @@ impl ScalePolicy {
         refs: &References,
         fit: bool,
         learn: bool,
-    ) -> (References, u32) {
+    ) -> (References, u32, References) {
         let mut pairs = refs.clone();
+        let mut by_size = References::new();
         let mut rulers = 0u32;
         for &(id, bbox, last_seen) in &self.fish {
             // Seen in the last frame.
@@ -327,8 +341,18 @@ impl ScalePolicy {
             if let Some(p) = self.rulers.pair(id, self.fit.as_ref(), length) {
                 let _ = pairs.push(p);
                 rulers += 1;
+                if let Some(a) = self.rulers.pair(id, None, length) {
+                    let _ = by_size.push(a);
+                }
             }
         }
-        (pairs, rulers)
+        (pairs, rulers, by_size)
     }
+}
+
+/// The median depth of `pairs`, m (NaN when empty): what the fish fit was asked to match.
+fn median_depth(pairs: &References) -> f64 {
+    let mut d: heapless::Vec<f64, { super::MAX_REFERENCES }> = pairs.iter().map(|p| p.depth.0).collect();
+    d.sort_unstable_by(f64::total_cmp);
+    if d.is_empty() { f64::NAN } else { d[d.len() / 2] }
 }

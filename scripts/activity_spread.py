@@ -1,0 +1,164 @@
+#!/usr/bin/env python3
+"""How far one activity reading on a real sequence can be trusted, and where its error comes from.
+
+On a sequence without speed truth (a real tank) the activity with the detector's boxes is judged
+against the same pipeline with the true boxes. One such reading moves with details that do not
+change the detection or tracking scores, so this runs the pipeline (`fme eval --boxes tracker
+--depth model`, the shipped schedule) on detection files that take the detector apart:
+
+- `true`: every true box (the reference);
+- `found`: the true boxes of the fish the detector finds (its true positives): which fish;
+- `found+jN`: the same, each box moved by N(0, 0.5 px) with seed N: how stable the reading is;
+- `detector`: the detector's boxes (this script's decode: fme's letterbox, confidence, NMS);
+- `detector+jN`: the same with the half-pixel jitter;
+and, for reference, `fme eval --boxes model` (fme's own decode) and `--boxes gt`.
+
+    python scripts/activity_spread.py DET.onnx [--sequence SEQ] [--jitter 5] [--work DIR] [--json]
+
+Needs the training venv (onnxruntime, opencv: scripts/setup_training.sh) and a built fme. The
+network input size is read from the model. On ../shared/realfish/mf25-seq2 (the default, the
+evaluation sequence) this is a measurement only: nothing may be chosen or tuned with it.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import onnxruntime as ort
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "training"))
+
+
+def net_size(path):
+    shape = ort.InferenceSession(path, providers=["CPUExecutionProvider"]).get_inputs()[0].shape
+    return int(shape[3]), int(shape[2])
+
+
+def read_gt(seq):
+    """frame -> [x, y, w, h, 1] rows of gt/gt.txt (rows marked ignored left out)."""
+    gt = {}
+    with open(os.path.join(seq, "gt", "gt.txt")) as f:
+        for n, line in enumerate(f, 1):
+            v = line.strip().split(",")
+            if len(v) < 6:
+                continue
+            if len(v) >= 7 and v[6].strip() == "0":
+                continue
+            try:
+                gt.setdefault(int(float(v[0])), []).append([float(x) for x in v[2:6]] + [1.0])
+            except ValueError:
+                raise SystemExit(f"{seq}/gt/gt.txt:{n}: not numbers: {line.strip()!r}")
+    return gt
+
+
+def detections(model, seq, conf, nms_iou):
+    """{variant: rows} of the detector on every frame: its boxes, and the true boxes it finds."""
+    import evaluate
+    import real
+    sess = evaluate.session(model)
+    name = sess.get_inputs()[0].name
+    gt = read_gt(seq)
+    n = real.seq_length(seq) or max(gt, default=0)
+    out = {"true": [], "found": [], "detector": []}
+    for fr in range(1, n + 1):
+        path = os.path.join(seq, "img1", f"{fr:06d}.jpg")
+        if not os.path.exists(path):
+            raise SystemExit(f"{path}: missing (seqinfo.ini says {n} frames)")
+        im, _wh, (gain, px, py) = real.letterboxed(path)
+        d, sc = evaluate.decode(sess.run(None, {name: evaluate.det_input(im)})[0], conf, nms_iou)
+        g = np.array(gt.get(fr, []), np.float32).reshape(-1, 5)
+        gn = g.copy()
+        gn[:, 0], gn[:, 1], gn[:, 2:4] = g[:, 0] * gain + px, g[:, 1] * gain + py, g[:, 2:4] * gain
+        hit = evaluate.match_found(d, gn)[4]
+        for b in g:
+            out["true"].append((fr, b[:4], 1.0))
+        for dn, s, h in zip(d, sc, hit):
+            out["detector"].append((fr, np.array([(dn[0] - px) / gain, (dn[1] - py) / gain, dn[2] / gain,
+                                                  dn[3] / gain]), float(s)))
+            if h:
+                out["found"].append((fr, g[int(np.argmax(evaluate.iou_one(dn, gn[:, :4])))][:4], float(s)))
+    return out
+
+
+def write_variant(work, seq, name, rows, jitter_seed=None):
+    d = os.path.join(work, name)
+    os.makedirs(os.path.join(d, "det"), exist_ok=True)
+    # Everything but det/: the variant is read as the sequence is (its meta.json, calibration, depth/).
+    for x in sorted(set(os.listdir(seq)) - {"det"}):
+        link = os.path.join(d, x)
+        if not os.path.lexists(link):
+            os.symlink(os.path.join(os.path.abspath(seq), x), link)
+    rng = np.random.default_rng(jitter_seed) if jitter_seed is not None else None
+    with open(os.path.join(d, "det", "det.txt"), "w") as f:
+        for fr, b, s in rows:
+            if rng is not None:
+                b = b + rng.normal(0.0, 0.5, 4)
+            f.write(f"{fr},-1,{b[0]:.2f},{b[1]:.2f},{b[2]:.2f},{b[3]:.2f},{s:.3f},-1,-1,-1\n")
+    return d
+
+
+KEYS = ("mean_activity_bls", "fit_failures", "activity_frames", "mota", "idf1")
+
+
+def fme_eval(fme, seq, boxes, det_model):
+    cmd = [fme, "eval", "--sequence", seq, "--boxes", boxes, "--depth", "model", "--threads", "1", "--json"]
+    if det_model:
+        cmd += ["--det-model", det_model]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)}: exit {r.returncode}: {r.stderr.strip()[-400:]}")
+    d = json.loads(r.stdout)
+    return {k: d.get(k) for k in KEYS}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("model", help="the detector ONNX file (int8, as shipped)")
+    ap.add_argument("--sequence", default=os.path.join(ROOT, "..", "shared", "realfish", "mf25-seq2"))
+    ap.add_argument("--jitter", type=int, default=5, help="jittered runs of each box source")
+    ap.add_argument("--conf", type=float, default=0.3, help="detector.confidence (fme's default)")
+    ap.add_argument("--nms-iou", type=float, default=0.5, help="detector.nms_iou (fme's default)")
+    ap.add_argument("--work", default="/tmp/fme-activity-spread")
+    ap.add_argument("--fme", default=os.path.join(ROOT, "target", "release", "fme"))
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    for p, what in ((args.model, "model"), (args.fme, "fme binary (make build)")):
+        if not os.path.exists(p):
+            raise SystemExit(f"{p}: no such {what}")
+    if not os.path.isfile(os.path.join(args.sequence, "gt", "gt.txt")):
+        raise SystemExit(f"{args.sequence}: not a MOTChallenge sequence with gt/gt.txt")
+    os.environ["FME_NET"] = "%dx%d" % net_size(args.model)
+    rows = detections(args.model, args.sequence, args.conf, args.nms_iou)
+    runs = {"fme --boxes gt": fme_eval(args.fme, args.sequence, "gt", None),
+            "fme --boxes model": fme_eval(args.fme, args.sequence, "model", args.model)}
+    for name in ("true", "found", "detector"):
+        runs[name] = fme_eval(args.fme, write_variant(args.work, args.sequence, name, rows[name]), "tracker", None)
+        if name == "true":
+            continue
+        for k in range(1, args.jitter + 1):
+            d = write_variant(args.work, args.sequence, f"{name}+j{k}", rows[name], k)
+            runs[f"{name}+j{k}"] = fme_eval(args.fme, d, "tracker", None)
+    summary = {}
+    for name in ("found", "detector"):
+        v = [r["mean_activity_bls"] for k, r in runs.items() if k.split("+")[0] == name]
+        summary[name] = {"min": min(v), "max": max(v), "runs": len(v)}
+    if args.json:
+        print(json.dumps({"model": args.model, "sequence": args.sequence, "runs": runs, "spread": summary}, indent=1))
+        return
+    ref = runs["true"]["mean_activity_bls"]
+    print(f"{args.model} on {args.sequence} (activity in BL/s; error against `true`, {ref:.3f})")
+    print(f"{'boxes':<20} {'BL/s':>7} {'error':>7} {'fit fails':>9} {'MOTA':>6} {'IDF1':>6}")
+    for k, r in runs.items():
+        a = r["mean_activity_bls"]
+        mota, idf1 = (("-" if x is None else f"{x:.3f}") for x in (r["mota"], r["idf1"]))
+        print(f"{k:<20} {a:7.3f} {100 * (a / ref - 1):+6.1f}% {r['fit_failures']:>9} {mota:>6} {idf1:>6}")
+    for name, s in summary.items():
+        print(f"{name}: {s['min']:.3f}-{s['max']:.3f} BL/s over {s['runs']} runs "
+              f"({100 * (s['min'] / ref - 1):+.1f}% to {100 * (s['max'] / ref - 1):+.1f}%)")
+
+
+if __name__ == "__main__":
+    main()
