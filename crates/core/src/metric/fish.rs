@@ -12,7 +12,7 @@
 //! off are rejected. The cohort's mean length `L` sets the scale: a length 10 % off scales every depth, and
 //! so every speed in m/s, by 10 %; speeds in body lengths per second do not depend on it.
 
-use super::fit::{DepthModel, FitError, ReferencePair, ScaleShift, fit_robust};
+use super::fit::{DepthModel, FitError, ReferencePair, ScaleShift, fit_robust, quantile};
 use super::method::DepthFit;
 use crate::geometry::{Intrinsics, Pixel};
 use crate::units::Metres;
@@ -82,8 +82,7 @@ pub fn fit_rulers(pairs: &[ReferencePair], length_cv: f64) -> Result<ScaleShift,
 pub fn depth_over_sizes(f: &ScaleShift, by_size: &[ReferencePair]) -> f64 {
     let mut q: heapless::Vec<f64, { super::MAX_REFERENCES }> =
         by_size.iter().filter_map(|p| f.depth(p.relative).map(|d| d.0 / p.depth.0)).collect();
-    q.sort_unstable_by(f64::total_cmp);
-    if q.is_empty() { f64::NAN } else { q[q.len() / 2] }
+    quantile(&mut q, 0.5).unwrap_or(f64::NAN)
 }
 
 /// `f` when it keeps the fish within [`MAX_OFF_SIZES`] of the depths their sizes give (or there is
@@ -252,16 +251,6 @@ impl LengthLearner {
         self.last = None;
         self.lengths.clear();
     }
-}
-
-/// The `q` quantile of `values` (reordered; nearest rank); `None` when empty.
-fn quantile(values: &mut [f64], q: f64) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    let k = ((values.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
-    let (_, v, _) = values.select_nth_unstable_by(k, f64::total_cmp);
-    Some(*v)
 }
 
 /// Exponential smoothing of successive fish fits' scale and shift ([`FISH_FIT_SMOOTHING_S`]).

@@ -102,12 +102,17 @@ pub fn depth_gain(f: &ScaleShift, pairs: &[ReferencePair]) -> f64 {
         .filter(|&(i, p)| usable(p) && (i >= 32 || f.rejected & (1 << i) == 0))
         .map(|(_, p)| p.relative)
         .collect();
-    if r.is_empty() {
-        return f64::NAN;
+    quantile(&mut r, 0.5).map_or(f64::NAN, |m| f.s * m / (f.s * m + f.t))
+}
+
+/// The `q` quantile of `values` (reordered; nearest rank); `None` when empty.
+pub(crate) fn quantile(values: &mut [f64], q: f64) -> Option<f64> {
+    if values.is_empty() {
+        return None;
     }
-    r.sort_unstable_by(f64::total_cmp);
-    let m = r[r.len() / 2];
-    f.s * m / (f.s * m + f.t)
+    let k = ((values.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
+    let (_, v, _) = values.select_nth_unstable_by(k, f64::total_cmp);
+    Some(*v)
 }
 
 fn usable(p: &ReferencePair) -> bool {

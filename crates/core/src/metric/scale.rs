@@ -353,6 +353,5 @@ impl ScalePolicy {
 /// The median depth of `pairs`, m (NaN when empty): what the fish fit was asked to match.
 fn median_depth(pairs: &References) -> f64 {
     let mut d: heapless::Vec<f64, { super::MAX_REFERENCES }> = pairs.iter().map(|p| p.depth.0).collect();
-    d.sort_unstable_by(f64::total_cmp);
-    if d.is_empty() { f64::NAN } else { d[d.len() / 2] }
+    super::fit::quantile(&mut d, 0.5).unwrap_or(f64::NAN)
 }
