@@ -37,30 +37,13 @@ def net_size(path):
     return int(shape[3]), int(shape[2])
 
 
-def read_gt(seq):
-    """frame -> [x, y, w, h, 1] rows of gt/gt.txt (rows marked ignored left out)."""
-    gt = {}
-    with open(os.path.join(seq, "gt", "gt.txt")) as f:
-        for n, line in enumerate(f, 1):
-            v = line.strip().split(",")
-            if len(v) < 6:
-                continue
-            if len(v) >= 7 and v[6].strip() == "0":
-                continue
-            try:
-                gt.setdefault(int(float(v[0])), []).append([float(x) for x in v[2:6]] + [1.0])
-            except ValueError:
-                raise SystemExit(f"{seq}/gt/gt.txt:{n}: not numbers: {line.strip()!r}")
-    return gt
-
-
 def detections(model, seq, conf, nms_iou):
     """{variant: rows} of the detector on every frame: its boxes, and the true boxes it finds."""
     import evaluate
     import real
     sess = evaluate.session(model)
     name = sess.get_inputs()[0].name
-    gt = read_gt(seq)
+    gt = real.read_mot_gt(seq)
     n = real.seq_length(seq) or max(gt, default=0)
     out = {"true": [], "found": [], "detector": []}
     for fr in range(1, n + 1):

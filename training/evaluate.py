@@ -197,9 +197,9 @@ class Geometry:
             if inside.sum() >= 2:
                 self.merged += 1
                 continue
-            w = np.clip(np.minimum(d[0] + d[2], gt[:, 0] + gt[:, 2]) - np.maximum(d[0], gt[:, 0]), 0, None)
-            h_ = np.clip(np.minimum(d[1] + d[3], gt[:, 1] + gt[:, 3]) - np.maximum(d[1], gt[:, 1]), 0, None)
-            share = w * h_ / max(d[2] * d[3], 1e-9)
+            ix = np.clip(np.minimum(d[0] + d[2], gt[:, 0] + gt[:, 2]) - np.maximum(d[0], gt[:, 0]), 0, None)
+            iy = np.clip(np.minimum(d[1] + d[3], gt[:, 1] + gt[:, 3]) - np.maximum(d[1], gt[:, 1]), 0, None)
+            share = ix * iy / max(d[2] * d[3], 1e-9)
             if ((share >= 0.7) & (d[2] * d[3] < 0.5 * gt[:, 2] * gt[:, 3])).any():
                 self.fragment += 1
 

@@ -135,13 +135,10 @@ def seq_length(seq):
     return int(ini.get("Sequence", "seqLength", fallback="0") or 0)
 
 
-def load_mot(seq, split=None, every=1):
-    """A MOTChallenge folder (a black-box recording or CVAT's MOT 1.1 export) at the network size:
-    frames with a gt row, or every frame when the sequence has a gt file (an unlabelled frame of a
-    labelled sequence is an image without fish). CVAT MOT rows: frame, id, x, y, w, h, not-ignored,
-    class, visibility; rows marked ignored (7th column 0) are dropped. The held-out split is the
-    last MOT_HELD_OUT of the frames: one stretch of the recording, never the neighbours of a
-    training frame."""
+def read_mot_gt(seq):
+    """frame -> [(x, y, w, h, 1.0)] in source pixels of a MOTChallenge sequence's gt/gt.txt
+    (frame, id, x, y, w, h, not-ignored, ...; CVAT MOT 1.1 rows marked ignored, 7th column 0, are
+    left out). A missing file or a malformed row is an error that names it."""
     gt = {}
     gt_path = os.path.join(seq, "gt", "gt.txt")
     if not os.path.exists(gt_path):
@@ -160,6 +157,17 @@ def load_mot(seq, split=None, every=1):
                 gt.setdefault(fr, []).append((float(v[2]), float(v[3]), float(v[4]), float(v[5]), 1.0))
             except ValueError:
                 raise SystemExit(f"{gt_path}:{n}: not numbers: {line.strip()!r}")
+    return gt
+
+
+def load_mot(seq, split=None, every=1):
+    """A MOTChallenge folder (a black-box recording or CVAT's MOT 1.1 export) at the network size:
+    frames with a gt row, or every frame when the sequence has a gt file (an unlabelled frame of a
+    labelled sequence is an image without fish). CVAT MOT rows: frame, id, x, y, w, h, not-ignored,
+    class, visibility; rows marked ignored (7th column 0) are dropped. The held-out split is the
+    last MOT_HELD_OUT of the frames: one stretch of the recording, never the neighbours of a
+    training frame."""
+    gt = read_mot_gt(seq)
     n_max = seq_length(seq)
     img_dir = os.path.join(seq, "img1")
     names = sorted(n for n in os.listdir(img_dir) if n.lower().endswith(IMAGE_EXT) and n[0].isdigit())

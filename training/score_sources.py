@@ -10,7 +10,7 @@ import os
 
 import data
 import real
-from train_real import per_source_quality
+from train_real import VAL_EVERY, per_source_quality
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -26,10 +26,10 @@ def main():
     args = ap.parse_args()
     val = real.load_pool(args.real, "val")
     if args.renders:
-        images, boxes, _, _ = data.load_many(args.renders, every=5, with_depth=False)
+        images, boxes, _, _ = data.load_many(args.renders, every=VAL_EVERY["renders"], with_depth=False)
         val["renders"] = (images, boxes)
     if args.close_renders and os.path.isdir(args.close_renders):
-        images, boxes, _, _ = data.load_many(args.close_renders, every=3, with_depth=False)
+        images, boxes, _, _ = data.load_many(args.close_renders, every=VAL_EVERY["renders-close"], with_depth=False)
         val["renders-close"] = (images, boxes)
     per_source_quality(args.model, val, args.nms_iou, print, os.path.basename(args.model))
 

@@ -37,6 +37,22 @@ CONFS = (0.2, 0.25, 0.3, 0.35, 0.4, 0.5)
 REPEAT = {"aquarium": 2, "zebrafish-lab": 3}
 
 
+# Held-out renders' frame step: the swarm renders every 5th frame, the fewer close-fish ones every 3rd.
+VAL_EVERY = {"renders": 5, "renders-close": 3}
+
+
+def load_renders(synth, prefix, limit, val_every):
+    """The renders of SYNTH/<prefix>train (the first `limit` sequences, all with 0; every 3rd frame)
+    and their held-out SYNTH/<prefix>val: (images, boxes, (val images, val boxes), counts)."""
+    t_imgs, t_boxes, _, t_seqs = data.load_many(os.path.join(synth, prefix + "train"), every=3, with_depth=False,
+                                                limit=limit)
+    v_imgs, v_boxes, _, v_seqs = data.load_many(os.path.join(synth, prefix + "val"), every=val_every,
+                                                with_depth=False)
+    info = {"train_sequences": len(t_seqs), "train_frames": int(len(t_imgs)),
+            "val_sequences": len(v_seqs), "val_frames": int(len(v_imgs))}
+    return t_imgs, t_boxes, (v_imgs, v_boxes), info
+
+
 def fmt(x):
     return "-" if x is None else f"{x:.2f}"
 
@@ -131,26 +147,17 @@ def main():
     n_real = sum(len(b) for b in imgs)
     synth_info = None
     if args.synth and not finetune:
-        s_imgs, s_boxes, _, s_seqs = data.load_many(os.path.join(args.synth, "train"), every=3, with_depth=False,
-                                                    limit=args.synth_seqs)
-        imgs.append(s_imgs)
-        boxes.extend(s_boxes)
-        color.extend([False] * len(s_imgs))
-        v_imgs, v_boxes, _, v_seqs = data.load_many(os.path.join(args.synth, "val"), every=5, with_depth=False)
-        val["renders"] = (v_imgs, v_boxes)
-        synth_info = {"train_sequences": len(s_seqs), "train_frames": int(len(s_imgs)),
-                      "val_sequences": len(v_seqs), "val_frames": int(len(v_imgs))}
+        def add(t_imgs, t_boxes):
+            imgs.append(t_imgs)
+            boxes.extend(t_boxes)
+            color.extend([False] * len(t_imgs))
+
+        *t, val["renders"], synth_info = load_renders(args.synth, "", args.synth_seqs, VAL_EVERY["renders"])
+        add(*t)
         if args.close_seqs > 0:
-            c_imgs, c_boxes, _, c_seqs = data.load_many(os.path.join(args.synth, "close-train"), every=3,
-                                                        with_depth=False, limit=args.close_seqs)
-            imgs.append(c_imgs)
-            boxes.extend(c_boxes)
-            color.extend([False] * len(c_imgs))
-            cv_imgs, cv_boxes, _, cv_seqs = data.load_many(os.path.join(args.synth, "close-val"), every=3,
-                                                           with_depth=False)
-            val["renders-close"] = (cv_imgs, cv_boxes)
-            synth_info["close"] = {"train_sequences": len(c_seqs), "train_frames": int(len(c_imgs)),
-                                   "val_sequences": len(cv_seqs), "val_frames": int(len(cv_imgs))}
+            *t, val["renders-close"], synth_info["close"] = load_renders(
+                args.synth, "close-", args.close_seqs, VAL_EVERY["renders-close"])
+            add(*t)
     images = np.concatenate(imgs)
     log(f"data: {n_real} real training images ({', '.join(f'{k} {len(v[0])}' for k, v in train_sets.items())}), "
         f"{len(images) - n_real} renders; held out: {', '.join(f'{k} {len(v[0])}' for k, v in val.items())} "

@@ -80,8 +80,11 @@ pub fn fit_rulers(pairs: &[ReferencePair], length_cv: f64) -> Result<ScaleShift,
 /// The median over `by_size` (each ruler's pair from its angular length alone, [`Rulers::pair`]
 /// without a fit) of the fit's depth there over that pair's depth; NaN when none has a depth.
 pub fn depth_over_sizes(f: &ScaleShift, by_size: &[ReferencePair]) -> f64 {
-    let mut q: heapless::Vec<f64, { super::MAX_REFERENCES }> =
-        by_size.iter().filter_map(|p| f.depth(p.relative).map(|d| d.0 / p.depth.0)).collect();
+    let mut q: heapless::Vec<f64, { super::MAX_REFERENCES }> = by_size
+        .iter()
+        .take(super::MAX_REFERENCES)
+        .filter_map(|p| f.depth(p.relative).map(|d| d.0 / p.depth.0))
+        .collect();
     quantile(&mut q, 0.5).unwrap_or(f64::NAN)
 }
 

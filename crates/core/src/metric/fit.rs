@@ -96,10 +96,12 @@ pub fn depth_gain(f: &ScaleShift, pairs: &[ReferencePair]) -> f64 {
     if f.model != DepthModel::Inverse {
         return f64::NAN;
     }
+    // `rejected` has a bit per pair of the fit's first MAX_REFERENCES (32), as `fit_robust` reads them.
     let mut r: heapless::Vec<f64, MAX_REFERENCES> = pairs
         .iter()
+        .take(MAX_REFERENCES)
         .enumerate()
-        .filter(|&(i, p)| usable(p) && (i >= 32 || f.rejected & (1 << i) == 0))
+        .filter(|&(i, p)| usable(p) && f.rejected & (1 << i) == 0)
         .map(|(_, p)| p.relative)
         .collect();
     quantile(&mut r, 0.5).map_or(f64::NAN, |m| f.s * m / (f.s * m + f.t))
