@@ -127,20 +127,29 @@ def main():
     summary = {}
     for name in ("found", "detector"):
         v = [r["mean_activity_bls"] for k, r in runs.items() if k.split("+")[0] == name]
-        summary[name] = {"min": min(v), "max": max(v), "runs": len(v)}
+        v = [a for a in v if a is not None]
+        summary[name] = {"min": min(v, default=None), "max": max(v, default=None), "runs": len(v)}
     if args.json:
         print(json.dumps({"model": args.model, "sequence": args.sequence, "runs": runs, "spread": summary}, indent=1))
         return
     ref = runs["true"]["mean_activity_bls"]
-    print(f"{args.model} on {args.sequence} (activity in BL/s; error against `true`, {ref:.3f})")
+    print(f"{args.model} on {args.sequence} (activity in BL/s; error against `true`, "
+          f"{'-' if ref is None else f'{ref:.3f}'})")
     print(f"{'boxes':<20} {'BL/s':>7} {'error':>7} {'fit fails':>9} {'MOTA':>6} {'IDF1':>6}")
+    def err(a):
+        return f"{100 * (a / ref - 1):+6.1f}%" if a is not None and ref else "      -"
+
     for k, r in runs.items():
         a = r["mean_activity_bls"]
         mota, idf1 = (("-" if x is None else f"{x:.3f}") for x in (r["mota"], r["idf1"]))
-        print(f"{k:<20} {a:7.3f} {100 * (a / ref - 1):+6.1f}% {r['fit_failures']:>9} {mota:>6} {idf1:>6}")
+        bls = "      -" if a is None else f"{a:7.3f}"
+        print(f"{k:<20} {bls} {err(a)} {r['fit_failures']:>9} {mota:>6} {idf1:>6}")
     for name, s in summary.items():
-        print(f"{name}: {s['min']:.3f}-{s['max']:.3f} BL/s over {s['runs']} runs "
-              f"({100 * (s['min'] / ref - 1):+.1f}% to {100 * (s['max'] / ref - 1):+.1f}%)")
+        if s["min"] is None:
+            print(f"{name}: no activity reading")
+            continue
+        print(f"{name}: {s['min']:.3f}-{s['max']:.3f} BL/s over {s['runs']} runs ({err(s['min']).strip()} to "
+              f"{err(s['max']).strip()})")
 
 
 if __name__ == "__main__":

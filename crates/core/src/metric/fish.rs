@@ -12,7 +12,7 @@
 //! off are rejected. The cohort's mean length `L` sets the scale: a length 10 % off scales every depth, and
 //! so every speed in m/s, by 10 %; speeds in body lengths per second do not depend on it.
 
-use super::fit::{DepthModel, FitError, ReferencePair, ScaleShift, fit_robust, quantile};
+use super::fit::{DepthModel, FitError, ReferencePair, ScaleShift, fit_robust, fit_scale_at, quantile};
 use super::method::DepthFit;
 use crate::geometry::{Intrinsics, Pixel};
 use crate::units::Metres;
@@ -67,14 +67,43 @@ pub fn ruler_depth(intrinsics: &Intrinsics, centre: Pixel, broadside_rad: f64, l
     (z.is_finite() && z > 0.0).then_some(Metres(z))
 }
 
+/// Inlier rulers a fish fit needs before it fits the depth network's shift as well as its scale.
+/// A line through two rulers checks nothing and one through three is checked once; with few
+/// rulers whose relative values nearly coincide such a line takes almost any slope, and every
+/// fish's depth, and so its speed along the line of sight, follows it. With fewer inliers the
+/// scale alone is fitted, at the shift of the last fit that had enough, and before there is one
+/// the fit is refused ([`fit_rulers`]): the depth network's shift is its own (on renders it
+/// carries four fifths of the depth), so no fixed value can stand in for it.
+pub const MIN_SHIFT_INLIERS: usize = 4;
+
+/// A fish fit, and whether it fitted the shift or kept the one it was given.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RulerFit {
+    /// The fit (inverse model).
+    pub fit: ScaleShift,
+    /// The shift was fitted ([`MIN_SHIFT_INLIERS`] inliers or more), not given.
+    pub shift_fitted: bool,
+}
+
 /// The fit over fish rulers (and any references among `pairs`): the inverse model by [`fit_robust`],
-/// a pair an inlier within 0.1 m or twice the cohort's length spread `length_cv` (at least 5 %).
-pub fn fit_rulers(pairs: &[ReferencePair], length_cv: f64) -> Result<ScaleShift, FitError> {
+/// a pair an inlier within 0.1 m or twice the cohort's length spread `length_cv` (at least 5 %);
+/// when that fit keeps fewer than [`MIN_SHIFT_INLIERS`] pairs, the scale alone at `shift`
+/// ([`fit_scale_at`]), or [`FitError::TooFewInliers`] without one.
+pub fn fit_rulers(pairs: &[ReferencePair], length_cv: f64, shift: Option<f64>) -> Result<RulerFit, FitError> {
     let usable = pairs.iter().filter(|p| p.relative.is_finite() && p.depth.0 > 0.0).count();
     if usable < MIN_RULERS {
         return Err(FitError::TooFewReferences { usable, needed: MIN_RULERS });
     }
-    fit_robust(DepthModel::Inverse, pairs, Metres(0.1), (2.0 * length_cv).max(0.05))
+    let (abs, rel) = (Metres(0.1), (2.0 * length_cv).max(0.05));
+    match fit_robust(DepthModel::Inverse, pairs, abs, rel) {
+        Ok(fit) if fit.used >= MIN_SHIFT_INLIERS => Ok(RulerFit { fit, shift_fitted: true }),
+        line => match shift {
+            Some(t) => fit_scale_at(t, pairs, abs, rel).map(|fit| RulerFit { fit, shift_fitted: false }),
+            None => {
+                Err(line.map_or_else(|e| e, |f| FitError::TooFewInliers { inliers: f.used, needed: MIN_SHIFT_INLIERS }))
+            }
+        },
+    }
 }
 
 /// The median over `by_size` (each ruler's pair from its angular length alone, [`Rulers::pair`]
@@ -316,13 +345,46 @@ mod tests {
             };
             let _ = pairs.push(ReferencePair { relative: r, depth: Metres(d * err) });
         }
-        let f = fit_rulers(&pairs, 0.1).unwrap();
+        let RulerFit { fit: f, shift_fitted } = fit_rulers(&pairs, 0.1, None).unwrap();
+        assert!(shift_fitted);
+        assert!((f.t - 0.05).abs() < 0.02, "{f:?}");
         assert_eq!(f.rejected.count_ones(), 2, "{f:?}");
         for d in [2.0, 4.0] {
             let r = (1.0 / d - 0.05) / 0.2;
             assert!((f.depth(r).unwrap().0 / d - 1.0).abs() < 0.05, "{d}: {f:?}");
         }
-        assert!(matches!(fit_rulers(&pairs[..2], 0.1), Err(FitError::TooFewReferences { .. })));
+        assert!(matches!(fit_rulers(&pairs[..2], 0.1, None), Err(FitError::TooFewReferences { .. })));
+    }
+
+    #[test]
+    fn few_rulers_fit_the_scale_alone_at_the_given_shift() {
+        // 1/D = 0.2 R + 0.05, three rulers with nearly the same relative value and lengths a few
+        // per cent off: a line through two of them is steep, the scale alone at the shift is not.
+        let truth = |d: f64| (1.0 / d - 0.05) / 0.2;
+        let pairs: heapless::Vec<ReferencePair, 32> = [(2.0, 1.04), (2.05, 0.97), (2.1, 1.0)]
+            .iter()
+            .map(|&(d, err)| ReferencePair { relative: truth(d), depth: Metres(d * err) })
+            .collect();
+        let line = fit_robust(DepthModel::Inverse, &pairs, Metres(0.1), 0.05).unwrap();
+        assert!(line.used < MIN_SHIFT_INLIERS);
+        // Without a shift from an earlier fit: refused, not a guess.
+        assert!(matches!(fit_rulers(&pairs, 0.1, None), Err(FitError::TooFewInliers { .. })));
+        let RulerFit { fit, shift_fitted } = fit_rulers(&pairs, 0.1, Some(0.05)).unwrap();
+        assert!(!shift_fitted);
+        assert_eq!(fit.t, 0.05);
+        assert!((fit.s / 0.2 - 1.0).abs() < 0.05, "{fit:?}");
+        // Where the fish go nearer or farther the scale-only fit stays on the truth.
+        for d in [1.0, 4.0] {
+            assert!((fit.depth(truth(d)).unwrap().0 / d - 1.0).abs() < 0.06, "{d}: {fit:?}");
+        }
+        // The same pairs plus enough rulers elsewhere fit the shift.
+        let mut more = pairs.clone();
+        for d in [1.0, 1.5, 3.0, 4.0] {
+            let _ = more.push(ReferencePair { relative: truth(d), depth: Metres(d) });
+        }
+        let RulerFit { fit, shift_fitted } = fit_rulers(&more, 0.1, None).unwrap();
+        assert!(shift_fitted);
+        assert!((fit.t - 0.05).abs() < 0.01, "{fit:?}");
     }
 
     #[test]

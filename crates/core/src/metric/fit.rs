@@ -40,6 +40,15 @@ pub enum FitError {
         /// Minimum for this model.
         needed: usize,
     },
+    /// A fit of the shift as well as the scale kept too few inliers to check it, and no earlier
+    /// fit gave a shift to fit the scale alone at (fish.rs, `MIN_SHIFT_INLIERS`).
+    #[error("a fit of scale and shift needs {needed} inliers, has {inliers}, and there is no earlier shift")]
+    TooFewInliers {
+        /// Inliers of the two-parameter fit.
+        inliers: usize,
+        /// Inliers needed.
+        needed: usize,
+    },
     /// All references have (nearly) the same relative value, so the scale is undetermined.
     #[error("reference objects all have the same relative inverse depth ({0}); scale is undetermined")]
     DegenerateRelative(f64),
@@ -264,12 +273,99 @@ pub fn fit_robust(
     Ok(f)
 }
 
+/// Robust fit of the inverse model's scale alone at a given shift `t` (`1/D = s*R + t`): every
+/// reference gives its own scale `(1/D - t) / R`; the one with the most references within
+/// `max(inlier_abs, inlier_rel * D)` wins (ties: lower total error), then weighted least squares
+/// on its inliers, repeated once on the refit's inliers. One parameter, so a single reference
+/// checks it where a line through two references checks nothing.
+pub fn fit_scale_at(
+    t: f64,
+    refs: &[ReferencePair],
+    inlier_abs: Metres,
+    inlier_rel: f64,
+) -> Result<ScaleShift, FitError> {
+    let refs = &refs[..refs.len().min(MAX_REFERENCES)];
+    let n_usable = refs.iter().filter(|p| usable(p)).count();
+    if n_usable < 2 {
+        return Err(FitError::TooFewReferences { usable: n_usable, needed: 2 });
+    }
+    if !t.is_finite() {
+        return Err(FitError::WrongScaleSign(f64::NAN));
+    }
+    let tol = |p: &ReferencePair| inlier_abs.0.max(inlier_rel * p.depth.0);
+    let scale_on = |mask: u32| -> Result<ScaleShift, FitError> {
+        // Least squares on 1/D weighted by D^4, as `least_squares`, with the shift held.
+        let (mut srr, mut sry) = (0.0, 0.0);
+        for (i, p) in refs.iter().enumerate() {
+            if mask & (1 << i) != 0 && usable(p) {
+                let (y, w) = target(DepthModel::Inverse, p);
+                srr += w * p.relative * p.relative;
+                sry += w * p.relative * (y - t);
+            }
+        }
+        if srr <= 0.0 {
+            return Err(FitError::DegenerateRelative(0.0));
+        }
+        finish(DepthModel::Inverse, sry / srr, t, refs, mask)
+    };
+    let inliers_of = |f: &ScaleShift| -> (u32, usize, f64) {
+        let (mut mask, mut count, mut err) = (0u32, 0usize, 0.0);
+        for (i, p) in refs.iter().enumerate() {
+            if let Some(d) = f.depth(p.relative).filter(|_| usable(p)) {
+                let e = (d.0 - p.depth.0).abs();
+                if e <= tol(p) {
+                    mask |= 1 << i;
+                    count += 1;
+                    err += e;
+                }
+            }
+        }
+        (mask, count, err)
+    };
+    let mut best: Option<(u32, usize, f64)> = None;
+    for i in 0..refs.len() {
+        let Ok(f) = scale_on(1 << i) else { continue };
+        let cand = inliers_of(&f);
+        if best.is_none_or(|(_, c, e)| cand.1 > c || (cand.1 == c && cand.2 < e)) {
+            best = Some(cand);
+        }
+    }
+    let Some((mut mask, _, _)) = best.filter(|b| b.1 >= 2) else {
+        return scale_on(all_mask(refs.len()));
+    };
+    let mut f = scale_on(mask)?;
+    let (mask2, count2, _) = inliers_of(&f);
+    if count2 >= 2
+        && mask2 != mask
+        && let Ok(f2) = scale_on(mask2)
+    {
+        f = f2;
+        mask = mask2;
+    }
+    let usable_mask = refs.iter().enumerate().filter(|(_, p)| usable(p)).fold(0u32, |m, (i, _)| m | (1 << i));
+    f.rejected = usable_mask & !mask;
+    Ok(f)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn refs_from(depths: &[f64], rel: impl Fn(f64) -> f64) -> References {
         depths.iter().map(|&d| ReferencePair { relative: rel(d), depth: Metres(d) }).collect()
+    }
+
+    #[test]
+    fn the_scale_alone_is_fitted_at_the_given_shift_and_an_odd_reference_rejected() {
+        // 1/D = 0.3 R + 0.1 at 1-5 m; reference 2 is 40 % off.
+        let mut refs = refs_from(&[1.0, 2.0, 3.0, 4.0, 5.0], |d| (1.0 / d - 0.1) / 0.3);
+        refs[2].depth = Metres(3.0 * 1.4);
+        let f = fit_scale_at(0.1, &refs, Metres(0.1), 0.05).unwrap();
+        assert_eq!((f.t, f.rejected, f.used), (0.1, 1 << 2, 4));
+        assert!((f.s - 0.3).abs() < 1e-9, "{f:?}");
+        // One usable reference is not a fit; a shift that leaves no positive scale is refused.
+        assert!(matches!(fit_scale_at(0.1, &refs[..1], Metres(0.1), 0.05), Err(FitError::TooFewReferences { .. })));
+        assert!(fit_scale_at(5.0, &refs, Metres(0.1), 0.05).is_err());
     }
 
     #[test]

@@ -25,10 +25,12 @@ mod scale;
 
 pub use fish::{
     AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, FISH_FIT_SMOOTHING_S, FitSmoother, LEARNED_LENGTH_SMOOTHING_S,
-    LENGTH_QUANTILE, LOOKS, LengthLearner, MAX_OFF_SIZES, MIN_LOOKS, MIN_RULERS, RULER_TIMEOUT_S, Rulers,
-    depth_over_sizes, fit_rulers, keep_fish_sizes, ruler_depth,
+    LENGTH_QUANTILE, LOOKS, LengthLearner, MAX_OFF_SIZES, MIN_LOOKS, MIN_RULERS, MIN_SHIFT_INLIERS, RULER_TIMEOUT_S,
+    RulerFit, Rulers, depth_over_sizes, fit_rulers, keep_fish_sizes, ruler_depth,
 };
-pub use fit::{DepthModel, FitError, ROBUST_INLIER, ReferencePair, References, ScaleShift, fit, fit_robust};
+pub use fit::{
+    DepthModel, FitError, ROBUST_INLIER, ReferencePair, References, ScaleShift, fit, fit_robust, fit_scale_at,
+};
 pub use grid::DepthGrid;
 pub use method::{DepthFit, DepthScale, FitMethod};
 pub use references::{ReferenceFootprints, ReferencePoints};

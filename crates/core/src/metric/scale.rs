@@ -5,9 +5,9 @@
 //! previous one.
 
 use super::{
-    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, DepthFit, DepthGrid, DepthSample, DepthScale, FitMethod, FitSmoother,
-    LengthLearner, MapKind, ROBUST_INLIER, ReferencePoints, References, Rulers, depth_over_sizes, fit_rulers,
-    keep_fish_sizes, sample_fish,
+    AUTO_MAX_RESIDUAL_M, AUTO_MIN_REFERENCES, DepthFit, DepthGrid, DepthModel, DepthSample, DepthScale, FitMethod,
+    FitSmoother, LengthLearner, MapKind, ROBUST_INLIER, ReferencePoints, References, RulerFit, Rulers,
+    depth_over_sizes, fit_rulers, keep_fish_sizes, sample_fish,
 };
 use crate::geometry::{Intrinsics, PixelBox, apparent_length};
 use crate::units::Metres;
@@ -107,6 +107,9 @@ pub struct ScalePolicy {
     stats: FitStats,
     /// The fish fit's running scale and shift.
     fish_fit: FitSmoother,
+    /// The shift of the running fish fit as last set by a fit that fitted it (or by the
+    /// references): a fit on fewer rulers fits the scale alone at this shift ([`fit_rulers`]).
+    fish_shift: Option<f64>,
     /// The fish's looks for the fish fit.
     rulers: Rulers,
     /// The cohort length measured under the references' fit (`depth.learn_fish_length`).
@@ -125,6 +128,7 @@ impl ScalePolicy {
             state: DepthFitState { references_visible: references_visible as u32, ..DepthFitState::default() },
             stats: FitStats::default(),
             fish_fit: FitSmoother::default(),
+            fish_shift: None,
             rulers: Rulers::new(max_fish),
             learned_length: LengthLearner::new(max_fish),
             fish: Vec::with_capacity(max_fish),
@@ -181,6 +185,9 @@ impl ScalePolicy {
                     // `auto` leaves references that fit badly (fouled, moved) to the fish.
                     if scale != DepthScale::Auto || ruler.is_none() || residual <= AUTO_MAX_RESIDUAL_M {
                         self.fish_fit.reset();
+                        // The references' shift, when they fitted the fish fit's model, is the
+                        // fish's until enough rulers fit one.
+                        self.fish_shift = f.scale_shift().filter(|ss| ss.model == DepthModel::Inverse).map(|ss| ss.t);
                         self.accept_reference_fit(f, refs.len());
                         // `auto` keeps looking at the fish, so they are rulers at once when the
                         // references go.
@@ -262,12 +269,15 @@ impl ScalePolicy {
             return;
         }
         self.state.references_visible = refs.len() as u32;
-        match fit_rulers(&pairs, self.cfg.body_length_cv).and_then(|f| keep_fish_sizes(f, &by_size)) {
-            Ok(f) => {
+        let fitted = fit_rulers(&pairs, self.cfg.body_length_cv, self.fish_shift)
+            .and_then(|r| keep_fish_sizes(r.fit, &by_size).map(|fit| RulerFit { fit, ..r }));
+        match fitted {
+            Ok(RulerFit { fit: f, shift_fitted }) => {
                 tracing::debug!(
                     t_s,
                     s = f.s,
                     t = f.t,
+                    shift_fitted,
                     pairs = pairs.len(),
                     rejected = f.rejected.count_ones(),
                     median_pair_m = median_depth(&pairs),
@@ -276,6 +286,9 @@ impl ScalePolicy {
                     "fish fit"
                 );
                 let f = self.fish_fit.update(t_s, f);
+                if shift_fitted {
+                    self.fish_shift = Some(f.t);
+                }
                 self.stats.fits += 1;
                 self.stats.residual_sum_m += f.residual_rms.0;
                 self.stats.residuals += 1;
