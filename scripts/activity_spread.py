@@ -11,7 +11,9 @@ change the detection or tracking scores, so this runs the pipeline (`fme eval --
 - `found+jN`: the same, each box moved by N(0, 0.5 px) with seed N: how stable the reading is;
 - `detector`: the detector's boxes (this script's decode: fme's letterbox, confidence, NMS);
 - `detector+jN`: the same with the half-pixel jitter;
-and, for reference, `fme eval --boxes model` (fme's own decode) and `--boxes gt`.
+and, for reference, `fme eval --boxes model` (fme's own decode) and `--boxes gt`. Then which fish
+the detector finds: the true boxes' speed in the image and size, found against missed, and the
+recall by fifths of each (where the true boxes have identities and seqinfo.ini a frame rate).
 
     python scripts/activity_spread.py DET.onnx [--sequence SEQ] [--jitter 5] [--work DIR] [--json]
 
@@ -43,26 +45,57 @@ def detections(model, seq, conf, nms_iou):
     import real
     sess = evaluate.session(model)
     name = sess.get_inputs()[0].name
-    gt = real.read_mot_gt(seq)
+    gt = real.read_mot_gt(seq, with_ids=True)
     n = real.seq_length(seq) or max(gt, default=0)
-    out = {"true": [], "found": [], "detector": []}
+    out = {"true": [], "found": [], "detector": [], "looks": []}
     for fr in range(1, n + 1):
         path = os.path.join(seq, "img1", f"{fr:06d}.jpg")
         if not os.path.exists(path):
             raise SystemExit(f"{path}: missing (seqinfo.ini says {n} frames)")
         im, _wh, (gain, px, py) = real.letterboxed(path)
         d, sc = evaluate.decode(sess.run(None, {name: evaluate.det_input(im)})[0], conf, nms_iou)
-        g = np.array(gt.get(fr, []), np.float32).reshape(-1, 5)
-        gn = g.copy()
+        g = np.array(gt.get(fr, []), np.float64).reshape(-1, 6)
+        gn = g[:, :5].copy()
         gn[:, 0], gn[:, 1], gn[:, 2:4] = g[:, 0] * gain + px, g[:, 1] * gain + py, g[:, 2:4] * gain
-        hit = evaluate.match_found(d, gn)[4]
-        for b in g:
+        _tp, _fp, found, _req, hit = evaluate.match_found(d, gn)
+        for b, f in zip(g, found):
             out["true"].append((fr, b[:4], 1.0))
+            out["looks"].append((fr, int(b[5]), b[:4], bool(f)))
         for dn, s, h in zip(d, sc, hit):
             out["detector"].append((fr, np.array([(dn[0] - px) / gain, (dn[1] - py) / gain, dn[2] / gain,
                                                   dn[3] / gain]), float(s)))
             if h:
                 out["found"].append((fr, g[int(np.argmax(evaluate.iou_one(dn, gn[:, :4])))][:4], float(s)))
+    return out
+
+
+def selection(looks, fps, span_s=0.1):
+    """Which fish the detector finds: each true box's speed in the image (its centre's move over
+    +-`span_s`, in its own long sides per second; boxes without both neighbours left out) and long
+    side, and the recall by fifths of each. A reading from the fish found is biased as they are."""
+    looks = [x for x in looks if x[1] >= 0]  # boxes without an identity (DeepFish) have no speed
+    by_id = {}
+    for fr, i, b, _f in looks:
+        by_id.setdefault(i, {})[fr] = b
+    k = max(1, round(span_s * fps))
+    rows = []
+    for fr, i, b, f in looks:
+        a, c = by_id[i].get(fr - k), by_id[i].get(fr + k)
+        if a is None or c is None:
+            continue
+        move = np.hypot(c[0] + c[2] / 2 - a[0] - a[2] / 2, c[1] + c[3] / 2 - a[1] - a[3] / 2)
+        rows.append((move * fps / (2 * k) / max(b[2], b[3]), max(b[2], b[3]), f))
+    if not rows:
+        return None
+    r = np.array(rows, np.float64)
+    out = {"boxes": len(r)}
+    for name, sel in (("found", r[:, 2] == 1), ("missed", r[:, 2] == 0)):
+        out[name] = {"boxes": int(sel.sum()), "mean_bls": float(r[sel, 0].mean()) if sel.any() else None,
+                     "median_long_px": float(np.median(r[sel, 1])) if sel.any() else None}
+    for name, col in (("recall_by_speed", 0), ("recall_by_long_side", 1)):
+        order = r[np.argsort(r[:, col], kind="stable")]
+        out[name] = [{"from": float(p[0, col]), "to": float(p[-1, col]), "recall": float(p[:, 2].mean())}
+                     for p in np.array_split(order, 5) if len(p)]
     return out
 
 
@@ -124,13 +157,17 @@ def main():
         for k in range(1, args.jitter + 1):
             d = write_variant(args.work, args.sequence, f"{name}+j{k}", rows[name], k)
             runs[f"{name}+j{k}"] = fme_eval(args.fme, d, "tracker", None)
+    import real
+    fps = real.frame_rate(args.sequence)
+    sel = selection(rows["looks"], fps) if fps > 0 else None
     summary = {}
     for name in ("found", "detector"):
         v = [r["mean_activity_bls"] for k, r in runs.items() if k.split("+")[0] == name]
         v = [a for a in v if a is not None]
         summary[name] = {"min": min(v, default=None), "max": max(v, default=None), "runs": len(v)}
     if args.json:
-        print(json.dumps({"model": args.model, "sequence": args.sequence, "runs": runs, "spread": summary}, indent=1))
+        print(json.dumps({"model": args.model, "sequence": args.sequence, "runs": runs, "spread": summary,
+                          "selection": sel}, indent=1))
         return
     ref = runs["true"]["mean_activity_bls"]
     print(f"{args.model} on {args.sequence} (activity in BL/s; error against `true`, "
@@ -150,6 +187,15 @@ def main():
             continue
         print(f"{name}: {s['min']:.3f}-{s['max']:.3f} BL/s over {s['runs']} runs ({err(s['min']).strip()} to "
               f"{err(s['max']).strip()})")
+    if sel:
+        def group(g):
+            return "none" if g["mean_bls"] is None else f"{g['mean_bls']:.3f} (median long side {g['median_long_px']:.0f} px)"
+
+        print(f"which fish are found ({sel['boxes']} true boxes with a speed): image speed, long sides/s, "
+              f"found {group(sel['found'])} against missed {group(sel['missed'])}")
+        for name, unit in (("recall_by_speed", "long sides/s"), ("recall_by_long_side", "px")):
+            print(f"  recall by fifths of {name[10:].replace('_', ' ')} ({unit}): " + ", ".join(
+                f"{q['from']:.2f}-{q['to']:.2f} {q['recall']:.2f}" for q in sel[name]))
 
 
 if __name__ == "__main__":

@@ -135,10 +135,18 @@ def seq_length(seq):
     return int(ini.get("Sequence", "seqLength", fallback="0") or 0)
 
 
-def read_mot_gt(seq):
+def frame_rate(seq):
+    """seqinfo.ini's frameRate (0 when absent)."""
+    ini = configparser.ConfigParser()
+    ini.read(os.path.join(seq, "seqinfo.ini"))
+    return float(ini.get("Sequence", "frameRate", fallback="0") or 0)
+
+
+def read_mot_gt(seq, with_ids=False):
     """frame -> [(x, y, w, h, 1.0)] in source pixels of a MOTChallenge sequence's gt/gt.txt
     (frame, id, x, y, w, h, not-ignored, ...; CVAT MOT 1.1 rows marked ignored, 7th column 0, are
-    left out). A missing file or a malformed row is an error that names it."""
+    left out), each with its id as a sixth value when `with_ids`. A missing file or a malformed row
+    is an error that names it."""
     gt = {}
     gt_path = os.path.join(seq, "gt", "gt.txt")
     if not os.path.exists(gt_path):
@@ -154,7 +162,8 @@ def read_mot_gt(seq):
                 continue
             try:
                 fr = int(float(v[0]))
-                gt.setdefault(fr, []).append((float(v[2]), float(v[3]), float(v[4]), float(v[5]), 1.0))
+                row = (float(v[2]), float(v[3]), float(v[4]), float(v[5]), 1.0)
+                gt.setdefault(fr, []).append(row + (int(float(v[1])),) if with_ids else row)
             except ValueError:
                 raise SystemExit(f"{gt_path}:{n}: not numbers: {line.strip()!r}")
     return gt
