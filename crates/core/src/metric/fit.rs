@@ -220,64 +220,19 @@ pub fn fit_robust(
     inlier_rel: f64,
 ) -> Result<ScaleShift, FitError> {
     let refs = &refs[..refs.len().min(MAX_REFERENCES)];
-    let n_usable = refs.iter().filter(|p| usable(p)).count();
-    if n_usable < 3 {
+    if refs.iter().filter(|p| usable(p)).count() < 3 {
         return fit(model, refs);
     }
-    let tol = |p: &ReferencePair| inlier_abs.0.max(inlier_rel * p.depth.0);
-    let inliers_of = |f: &ScaleShift| -> (u32, usize, f64) {
-        let (mut mask, mut count, mut err) = (0u32, 0usize, 0.0);
-        for (i, p) in refs.iter().enumerate() {
-            if !usable(p) {
-                continue;
-            }
-            if let Some(d) = f.depth(p.relative) {
-                let e = (d.0 - p.depth.0).abs();
-                if e <= tol(p) {
-                    mask |= 1 << i;
-                    count += 1;
-                    err += e;
-                }
-            }
-        }
-        (mask, count, err)
-    };
-    let mut best: Option<(u32, usize, f64)> = None;
-    for i in 0..refs.len() {
-        for j in i + 1..refs.len() {
-            let Ok(f) = least_squares(model, refs, (1 << i) | (1 << j)) else { continue };
-            let cand = inliers_of(&f);
-            let better = match best {
-                None => true,
-                Some((_, c, e)) => cand.1 > c || (cand.1 == c && cand.2 < e),
-            };
-            if better {
-                best = Some(cand);
-            }
-        }
-    }
-    let Some((mut mask, _, _)) = best.filter(|b| b.1 >= 2) else {
-        return fit(model, refs);
-    };
-    let mut f = least_squares(model, refs, mask)?;
-    let (mask2, count2, _) = inliers_of(&f);
-    if count2 >= 2
-        && mask2 != mask
-        && let Ok(f2) = least_squares(model, refs, mask2)
-    {
-        f = f2;
-        mask = mask2;
-    }
-    let usable_mask = refs.iter().enumerate().filter(|(_, p)| usable(p)).fold(0u32, |m, (i, _)| m | (1 << i));
-    f.rejected = usable_mask & !mask;
-    Ok(f)
+    let pairs = (0..refs.len()).flat_map(|i| (i + 1..refs.len()).map(move |j| (1u32 << i) | (1 << j)));
+    let samples = pairs.filter_map(|m| least_squares(model, refs, m).ok());
+    consensus(refs, (inlier_abs, inlier_rel), samples, |mask| least_squares(model, refs, mask))
+        .unwrap_or_else(|| fit(model, refs))
 }
 
 /// Robust fit of the inverse model's scale alone at a given shift `t` (`1/D = s*R + t`): every
-/// reference gives its own scale `(1/D - t) / R`; the one with the most references within
-/// `max(inlier_abs, inlier_rel * D)` wins (ties: lower total error), then weighted least squares
-/// on its inliers, repeated once on the refit's inliers. One parameter, so a single reference
-/// checks it where a line through two references checks nothing.
+/// reference gives its own scale `(1/D - t) / R`, then as [`fit_robust`] (the one with the most
+/// inliers wins, weighted least squares on its inliers, repeated once). One parameter, so a single
+/// reference checks it where a line through two references checks nothing.
 pub fn fit_scale_at(
     t: f64,
     refs: &[ReferencePair],
@@ -292,7 +247,6 @@ pub fn fit_scale_at(
     if !t.is_finite() {
         return Err(FitError::WrongScaleSign(f64::NAN));
     }
-    let tol = |p: &ReferencePair| inlier_abs.0.max(inlier_rel * p.depth.0);
     let scale_on = |mask: u32| -> Result<ScaleShift, FitError> {
         // Least squares on 1/D weighted by D^4, as `least_squares`, with the shift held.
         let (mut srr, mut sry) = (0.0, 0.0);
@@ -308,6 +262,21 @@ pub fn fit_scale_at(
         }
         finish(DepthModel::Inverse, sry / srr, t, refs, mask)
     };
+    let samples = (0..refs.len()).filter_map(|i| scale_on(1 << i).ok());
+    consensus(refs, (inlier_abs, inlier_rel), samples, scale_on).unwrap_or_else(|| scale_on(all_mask(refs.len())))
+}
+
+/// RANSAC's consensus step shared by the robust fits: of the `samples` (fits on minimal samples),
+/// the one with the most references within `max(abs, rel * D)` (ties: lower total error), then
+/// `refit` on its inliers, repeated once on the refit's inliers; rejected references in
+/// [`ScaleShift::rejected`]. `None` when no sample has two inliers.
+fn consensus(
+    refs: &[ReferencePair],
+    (inlier_abs, inlier_rel): (Metres, f64),
+    samples: impl Iterator<Item = ScaleShift>,
+    refit: impl Fn(u32) -> Result<ScaleShift, FitError>,
+) -> Option<Result<ScaleShift, FitError>> {
+    let tol = |p: &ReferencePair| inlier_abs.0.max(inlier_rel * p.depth.0);
     let inliers_of = |f: &ScaleShift| -> (u32, usize, f64) {
         let (mut mask, mut count, mut err) = (0u32, 0usize, 0.0);
         for (i, p) in refs.iter().enumerate() {
@@ -323,28 +292,28 @@ pub fn fit_scale_at(
         (mask, count, err)
     };
     let mut best: Option<(u32, usize, f64)> = None;
-    for i in 0..refs.len() {
-        let Ok(f) = scale_on(1 << i) else { continue };
+    for f in samples {
         let cand = inliers_of(&f);
         if best.is_none_or(|(_, c, e)| cand.1 > c || (cand.1 == c && cand.2 < e)) {
             best = Some(cand);
         }
     }
-    let Some((mut mask, _, _)) = best.filter(|b| b.1 >= 2) else {
-        return scale_on(all_mask(refs.len()));
+    let (mut mask, _, _) = best.filter(|b| b.1 >= 2)?;
+    let mut f = match refit(mask) {
+        Ok(f) => f,
+        Err(e) => return Some(Err(e)),
     };
-    let mut f = scale_on(mask)?;
     let (mask2, count2, _) = inliers_of(&f);
     if count2 >= 2
         && mask2 != mask
-        && let Ok(f2) = scale_on(mask2)
+        && let Ok(f2) = refit(mask2)
     {
         f = f2;
         mask = mask2;
     }
     let usable_mask = refs.iter().enumerate().filter(|(_, p)| usable(p)).fold(0u32, |m, (i, _)| m | (1 << i));
     f.rejected = usable_mask & !mask;
-    Ok(f)
+    Some(Ok(f))
 }
 
 #[cfg(test)]
