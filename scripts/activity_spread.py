@@ -73,7 +73,7 @@ def selection(looks, fps, span_s=0.1):
     """Which fish the detector finds: each true box's speed in the image (its centre's move over
     +-`span_s`, in its own long sides per second; boxes without both neighbours left out) and long
     side, and the recall by fifths of each. A reading from the fish found is biased as they are."""
-    looks = [x for x in looks if x[1] >= 0]  # boxes without an identity (DeepFish) have no speed
+    looks = [x for x in looks if x[1] >= 0]  # id -1: no identity, so no speed
     by_id = {}
     for fr, i, b, _f in looks:
         by_id.setdefault(i, {})[fr] = b
@@ -162,9 +162,10 @@ def main():
     sel = selection(rows["looks"], fps) if fps > 0 else None
     summary = {}
     for name in ("found", "detector"):
-        v = [r["mean_activity_bls"] for k, r in runs.items() if k.split("+")[0] == name]
-        v = [a for a in v if a is not None]
-        summary[name] = {"min": min(v, default=None), "max": max(v, default=None), "runs": len(v)}
+        every = [r["mean_activity_bls"] for k, r in runs.items() if k.split("+")[0] == name]
+        v = [a for a in every if a is not None]
+        summary[name] = {"min": min(v, default=None), "max": max(v, default=None), "runs": len(v),
+                         "of": len(every)}
     if args.json:
         print(json.dumps({"model": args.model, "sequence": args.sequence, "runs": runs, "spread": summary,
                           "selection": sel}, indent=1))
@@ -185,7 +186,8 @@ def main():
         if s["min"] is None:
             print(f"{name}: no activity reading")
             continue
-        print(f"{name}: {s['min']:.3f}-{s['max']:.3f} BL/s over {s['runs']} runs ({err(s['min']).strip()} to "
+        print(f"{name}: {s['min']:.3f}-{s['max']:.3f} BL/s over the {s['runs']} of {s['of']} runs with a reading "
+              f"({err(s['min']).strip()} to "
               f"{err(s['max']).strip()})")
     if sel:
         def group(g):

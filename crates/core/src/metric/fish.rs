@@ -8,8 +8,9 @@
 //! broadside length `l` under that fit. The fish's pair is then (its relative value now, its fitted
 //! depth now times `L / l`): a fit off by a factor is corrected in one step. Before any fit, the
 //! angular lengths alone give a first one ([`ruler_depth`]). The same eq. 2 family is fitted over the
-//! pairs by [`fit_robust`], with a tolerance from the cohort's spread, so fish whose length or box is
-//! off are rejected. The cohort's mean length `L` sets the scale: a length 10 % off scales every depth, and
+//! pairs by [`fit_robust`], or the scale alone by [`fit_scale_at`] when too few pairs agree to fit
+//! the shift ([`MIN_SHIFT_INLIERS`]), with a tolerance from the cohort's spread, so fish whose
+//! length or box is off are rejected. The cohort's mean length `L` sets the scale: a length 10 % off scales every depth, and
 //! so every speed in m/s, by 10 %; speeds in body lengths per second do not depend on it.
 
 use super::fit::{DepthModel, FitError, ReferencePair, ScaleShift, fit_robust, fit_scale_at, quantile};
@@ -42,9 +43,10 @@ pub const MIN_RULERS: usize = 3;
 /// The most a fish fit may put the fish nearer or farther than their sizes alone say: the median
 /// over the rulers of the fit's depth over [`ruler_depth`] must lie within `1/x..x`
 /// ([`keep_fish_sizes`]). On renders and real clips other than the evaluation sequence the fits
-/// stay within 0.9-1.25; with three or four rulers whose relative values nearly coincide, a
-/// two-pair fit can be so steep that the fish end up a few centimetres from the lens, and the
-/// 0.1 m inlier tolerance then keeps that fit.
+/// stay within 0.9-1.25; with a few rulers whose relative values nearly coincide, a line through
+/// them (even one with [`MIN_SHIFT_INLIERS`] inliers) can be so steep that the fish end up a few
+/// centimetres from the lens, and the 0.1 m inlier tolerance then keeps it; a scale fitted at an
+/// old shift can be as far off.
 pub const MAX_OFF_SIZES: f64 = 2.0;
 
 /// Time constant of the averaging of the cohort's length measured under the references' fit
@@ -367,6 +369,8 @@ mod tests {
             .collect();
         let line = fit_robust(DepthModel::Inverse, &pairs, Metres(0.1), 0.05).unwrap();
         assert!(line.used < MIN_SHIFT_INLIERS);
+        // The line through them sends a fish at 1 m far off (or behind the camera).
+        assert!(line.depth(truth(1.0)).is_none_or(|d| (d.0 - 1.0).abs() > 0.3), "{line:?}");
         // Without a shift from an earlier fit: refused, not a guess.
         assert!(matches!(fit_rulers(&pairs, 0.1, None), Err(FitError::TooFewInliers { .. })));
         let RulerFit { fit, shift_fitted } = fit_rulers(&pairs, 0.1, Some(0.05)).unwrap();

@@ -40,15 +40,19 @@ pub enum FitError {
         /// Minimum for this model.
         needed: usize,
     },
-    /// A fit of the shift as well as the scale kept too few inliers to check it, and no earlier
-    /// fit gave a shift to fit the scale alone at (fish.rs, `MIN_SHIFT_INLIERS`).
-    #[error("a fit of scale and shift needs {needed} inliers, has {inliers}, and there is no earlier shift")]
+    /// A robust fit kept too few references that agree with it: a fish fit of scale and shift
+    /// with no earlier shift to fit the scale alone at (fish.rs, `MIN_SHIFT_INLIERS`), or a
+    /// scale-only fit on which no two references agree.
+    #[error("the fit kept {inliers} agreeing references, it needs {needed}")]
     TooFewInliers {
-        /// Inliers of the two-parameter fit.
+        /// References within the fit's tolerance.
         inliers: usize,
-        /// Inliers needed.
+        /// References needed.
         needed: usize,
     },
+    /// The shift given to a scale-only fit is not a number.
+    #[error("the shift to fit the scale at is not a finite number ({0})")]
+    NonFiniteShift(f64),
     /// All references have (nearly) the same relative value, so the scale is undetermined.
     #[error("reference objects all have the same relative inverse depth ({0}); scale is undetermined")]
     DegenerateRelative(f64),
@@ -245,7 +249,7 @@ pub fn fit_scale_at(
         return Err(FitError::TooFewReferences { usable: n_usable, needed: 2 });
     }
     if !t.is_finite() {
-        return Err(FitError::WrongScaleSign(f64::NAN));
+        return Err(FitError::NonFiniteShift(t));
     }
     let scale_on = |mask: u32| -> Result<ScaleShift, FitError> {
         // Least squares on 1/D weighted by D^4, as `least_squares`, with the shift held.
@@ -263,7 +267,10 @@ pub fn fit_scale_at(
         finish(DepthModel::Inverse, sry / srr, t, refs, mask)
     };
     let samples = (0..refs.len()).filter_map(|i| scale_on(1 << i).ok());
-    consensus(refs, (inlier_abs, inlier_rel), samples, scale_on).unwrap_or_else(|| scale_on(all_mask(refs.len())))
+    // No two references agree on a scale: nothing to fit (unlike `fit_robust`, no plain fallback,
+    // since one parameter leaves no structure for the rest to follow).
+    consensus(refs, (inlier_abs, inlier_rel), samples, scale_on)
+        .unwrap_or(Err(FitError::TooFewInliers { inliers: 1, needed: 2 }))
 }
 
 /// RANSAC's consensus step shared by the robust fits: of the `samples` (fits on minimal samples),
@@ -335,6 +342,13 @@ mod tests {
         // One usable reference is not a fit; a shift that leaves no positive scale is refused.
         assert!(matches!(fit_scale_at(0.1, &refs[..1], Metres(0.1), 0.05), Err(FitError::TooFewReferences { .. })));
         assert!(fit_scale_at(5.0, &refs, Metres(0.1), 0.05).is_err());
+        assert!(matches!(fit_scale_at(f64::NAN, &refs, Metres(0.1), 0.05), Err(FitError::NonFiniteShift(_))));
+        // No two references agree on a scale: refused, not a least-squares compromise.
+        let scattered: References = [(1.0, 1.0), (2.0, 3.5), (3.0, 9.0)]
+            .iter()
+            .map(|&(r, d)| ReferencePair { relative: r, depth: Metres(d) })
+            .collect();
+        assert!(matches!(fit_scale_at(0.0, &scattered, Metres(0.1), 0.05), Err(FitError::TooFewInliers { .. })));
     }
 
     #[test]

@@ -7,7 +7,8 @@
 //! - [`DepthModel::Linear`]: the paper's eq. 2, `D = s*R + t`;
 //! - [`DepthModel::Inverse`]: the physically consistent `1/D = s*R + t` (MiDaS alignment);
 //! - [`fit_robust`]: either model fitted by exhaustive-pair RANSAC then least squares on the inliers,
-//!   which survives one or two fouled or hidden references.
+//!   which survives one or two fouled or hidden references; [`fit_scale_at`] the same for the
+//!   inverse model's scale alone at a known shift (the fish fit on few rulers).
 //!
 //! The paper's other regressors (2nd-order polynomial, decision tree, k-nearest neighbours, Table 4)
 //! live in [`regressors`]; [`FitMethod`] (`depth.fit`) chooses among all of them.

@@ -368,3 +368,78 @@ fn median_depth(pairs: &References) -> f64 {
     let mut d: heapless::Vec<f64, { super::MAX_REFERENCES }> = pairs.iter().map(|p| p.depth.0).collect();
     super::fit::quantile(&mut d, 0.5).unwrap_or(f64::NAN)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pixel;
+
+    /// A relative map that reads each fish's relative value inside its box (1/D = 0.2 R + 0.05).
+    struct Fishes(Vec<(PixelBox, f64)>);
+
+    impl DepthGrid for Fishes {
+        fn kind(&self) -> MapKind {
+            MapKind::InverseDepth
+        }
+        fn point(&self, px: Pixel) -> Option<f64> {
+            self.0.iter().find(|(b, _)| b.contains(px)).map(|x| x.1)
+        }
+        fn grid(&self, px: Pixel) -> Option<f64> {
+            self.point(px)
+        }
+    }
+
+    /// Fish of 0.35 m broadside at `depths`, stacked near the optical axis (where a box's width is
+    /// its angular length).
+    fn fishes(k: &Intrinsics, depths: &[f64]) -> Vec<(u32, PixelBox, f64)> {
+        depths
+            .iter()
+            .enumerate()
+            .map(|(i, &d)| {
+                let w = k.fx * 0.35 / d;
+                let c = Pixel::new(k.cx, k.cy + 30.0 * (i as f64 - 2.5));
+                (i as u32, PixelBox::from_center(c, w, w / 4.0), (1.0 / d - 0.05) / 0.2)
+            })
+            .collect()
+    }
+
+    /// Runs depth frames at 5 Hz over `from_s..to_s` with `fish` in view; returns the fit state.
+    fn run(p: &mut ScalePolicy, k: &Intrinsics, fish: &[(u32, PixelBox, f64)], from_s: f64, to_s: f64) {
+        let map = Fishes(fish.iter().map(|&(_, b, r)| (b, r)).collect());
+        let mut t = from_s;
+        while t < to_s {
+            p.refit(t, &map, &ReferencePoints::default(), k, fish.iter().map(|&(id, b, _)| (id, b, t)));
+            t += 0.2;
+        }
+    }
+
+    #[test]
+    fn the_fish_fit_takes_the_shift_from_enough_rulers_and_keeps_it_with_few() {
+        let k = Intrinsics::from_hfov(640, 384, 90.0).unwrap();
+        let cfg = ScaleConfig {
+            scale: DepthScale::Fish,
+            method: FitMethod::Robust,
+            sample: DepthSample::Centre,
+            learn_length: false,
+            body_length: Some(Metres(0.35)),
+            body_length_cv: 0.1,
+        };
+        // Three fish only: a line through them checks too little, and there is no shift yet.
+        let mut few = ScalePolicy::new(cfg, 16, 0);
+        run(&mut few, &k, &fishes(&k, &[1.0, 2.0, 3.0]), 0.0, 6.0);
+        assert!(!few.state().fitted);
+        assert!(few.stats().fits == 0 && few.stats().failures > 0);
+        // Six fish fit scale and shift; when three remain, the scale alone is fitted at that shift.
+        let mut p = ScalePolicy::new(cfg, 16, 0);
+        let six = fishes(&k, &[1.0, 1.5, 2.0, 2.5, 3.0, 3.5]);
+        run(&mut p, &k, &six, 0.0, 6.0);
+        let st = p.state();
+        assert!(st.fitted && st.fish_rulers == 6, "{st:?}");
+        assert!((st.shift - 0.05).abs() < 0.01, "{st:?}");
+        let fits = p.stats().fits;
+        run(&mut p, &k, &six[..3], 6.0, 10.0);
+        assert!(p.stats().fits > fits);
+        assert_eq!(p.state().shift, st.shift);
+        assert_eq!(p.state().fish_rulers, 3);
+    }
+}
