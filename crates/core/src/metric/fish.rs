@@ -13,7 +13,7 @@
 //! length or box is off are rejected. The cohort's mean length `L` sets the scale: a length 10 % off scales every depth, and
 //! so every speed in m/s, by 10 %; speeds in body lengths per second do not depend on it.
 
-use super::fit::{DepthModel, FitError, ReferencePair, ScaleShift, fit_robust, fit_scale_at, quantile};
+use super::fit::{DepthModel, FitError, ReferencePair, ScaleShift, fit_robust, fit_scale_at, quantile, usable};
 use super::method::DepthFit;
 use crate::geometry::{Intrinsics, Pixel};
 use crate::units::Metres;
@@ -92,9 +92,9 @@ pub struct RulerFit {
 /// when that fit keeps fewer than [`MIN_SHIFT_INLIERS`] pairs, the scale alone at `shift`
 /// ([`fit_scale_at`]), or [`FitError::TooFewInliers`] without one.
 pub fn fit_rulers(pairs: &[ReferencePair], length_cv: f64, shift: Option<f64>) -> Result<RulerFit, FitError> {
-    let usable = pairs.iter().filter(|p| p.relative.is_finite() && p.depth.0 > 0.0).count();
-    if usable < MIN_RULERS {
-        return Err(FitError::TooFewReferences { usable, needed: MIN_RULERS });
+    let n = pairs.iter().filter(|p| usable(p)).count();
+    if n < MIN_RULERS {
+        return Err(FitError::TooFewReferences { usable: n, needed: MIN_RULERS });
     }
     let (abs, rel) = (Metres(0.1), (2.0 * length_cv).max(0.05));
     match fit_robust(DepthModel::Inverse, pairs, abs, rel) {

@@ -130,7 +130,8 @@ pub(crate) fn quantile(values: &mut [f64], q: f64) -> Option<f64> {
     Some(*v)
 }
 
-fn usable(p: &ReferencePair) -> bool {
+/// A pair a fit can use: finite relative value, finite positive depth.
+pub(crate) fn usable(p: &ReferencePair) -> bool {
     p.relative.is_finite() && p.depth.0.is_finite() && p.depth.0 > 0.0
 }
 
