@@ -5,7 +5,9 @@
 - det.peak_max equals max_pool2d on the pixel-shuffled score map, bit for bit (ties included);
 - det.decode_nhwc equals det.decode, bit for bit, given the same head output;
 - the exported detector (each det.ARCHS layout, and mnv2 with a random body) in ONNX Runtime matches
-  the PyTorch module it came from, and so does det.from_onnx's rebuild of it (not for mnv2);
+  the PyTorch module it came from, and so does det.from_onnx's rebuild of it;
+- det.average (`train_real.py --average`) gives each weight the files' mean, and a file averaged
+  with itself is that file's network;
 - depth.fast_tail leaves the depth map as the plain export gives it, up to float rounding, and a
   second call changes nothing;
 - quant.channels_last_upsample rewrites every upsample of both int8 networks and changes no output
@@ -81,9 +83,8 @@ def check_det_export(tmp, arch):
     model.export_decode = True
     with torch.no_grad():
         want = model(x).numpy()
-    checks = [("PyTorch", run_onnx(path, "images", x.numpy()))]
-    if not pretrained:  # det.from_onnx rebuilds FishDet exports only
-        checks.append(("det.from_onnx's rebuild", rebuilt(path, x)))
+    checks = [("PyTorch", run_onnx(path, "images", x.numpy())),
+              ("det.from_onnx's rebuild", rebuilt(path, x, arch if pretrained else None))]
     for what, got in checks:
         if got.shape != want.shape:
             fail(f"{arch} detector: {what} output {got.shape}, PyTorch {want.shape}")
@@ -94,12 +95,41 @@ def check_det_export(tmp, arch):
                  f"{same_score:.4f} of the scores agree")
 
 
-def rebuilt(path, x):
-    """The output of det.from_onnx's module for the exported file (for --reexport)."""
-    model = det.from_onnx(path, 2)
+def rebuilt(path, x, arch=None):
+    """The output of det.from_onnx's module for the exported file (for --reexport and --init)."""
+    return output(det.from_onnx(path, 2, arch), x)
+
+
+def output(model, x):
     model.export_decode = True
     with torch.no_grad():
         return model(x).numpy()
+
+
+def check_average(tmp):
+    """det.average (train_real.py --average): each weight the mean of the files', and a file averaged
+    with itself the same network."""
+    paths = []
+    for seed in (5, 6):
+        torch.manual_seed(seed)
+        model = det.MNV2Det(sub=2, **det.PRETRAINED_ARCHS["mnv2"]).eval()
+        for p in model.parameters():  # the body's folded BatchNorm biases start at zero: give them values
+            p.data.add_(0.05 * torch.randn_like(p))
+        paths.append(os.path.join(tmp, f"avg_{seed}.onnx"))
+        det.export(model, paths[-1], 96, 160)
+    a, b = (det.from_onnx(p, 2, "mnv2").state_dict() for p in paths)
+    mean = det.average(paths, "mnv2").state_dict()
+    off = max((mean[k] - (a[k] + b[k]) / 2).abs().max().item() for k in a if a[k].is_floating_point())
+    if off > 1e-6 or not any((a[k] != b[k]).any() for k in a):
+        fail(f"det.average: a weight is {off:.3g} off the files' mean (or the two files are alike)")
+    x = torch.rand(1, 3, 96, 160)
+    if not np.array_equal(output(det.average([paths[0]] * 2, "mnv2"), x), rebuilt(paths[0], x, "mnv2")):
+        fail("det.average of a file with itself is not that file's network")
+    try:
+        det.average(paths[:1], "mnv2")
+        fail("det.average took one file")
+    except ValueError:
+        pass
 
 
 def check_depth_tail(tmp):
@@ -151,6 +181,7 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         for arch in (*det.ARCHS, "mnv2"):
             check_det_export(tmp, arch)
+        check_average(tmp)
         check_depth_tail(tmp)
         check_upsample(tmp)
     print("check_export: detector and depth graph tails and upsamples match their plain forms")

@@ -457,6 +457,24 @@ def from_onnx(path, sub=2, arch=None):
     return model.eval()
 
 
+def average(paths, arch):
+    """One model whose every weight is the mean of those of the fp32 exports `paths` (det.from_onnx
+    rebuilds each; they must share a layout). Meaningful only for runs that went on from one common
+    stage: their weights then lie in one basin, where the mean is itself a good network."""
+    if len(paths) < 2:
+        raise ValueError("average: name two or more fp32 exports")
+    models = [from_onnx(p, 2, arch) for p in paths]
+    states = [m.state_dict() for m in models]
+    keys = set(states[0])
+    for p, st in zip(paths[1:], states[1:]):
+        if set(st) != keys or any(st[k].shape != states[0][k].shape for k in keys):
+            raise ValueError(f"average: {p} has another layout than {paths[0]}")
+    mean = {k: (sum(st[k].double() for st in states) / len(states)).to(states[0][k].dtype)
+            if states[0][k].is_floating_point() else states[0][k] for k in keys}
+    models[0].load_state_dict(mean)
+    return models[0]
+
+
 # Regression samples (TTFNet, Liu et al. 2020): besides its centre cell, every cell where a fish's
 # heat-map Gaussian is at least REG_GAUSS_MIN regresses that fish's box, weighted by the Gaussian and
 # normalised per fish. CenterNet's one sample per fish trains the size head slowly, and training here

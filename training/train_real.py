@@ -6,6 +6,7 @@ and reports precision / recall per source on each source's held-out split (docs/
     python train_real.py --real ../../shared/realfish/train --synth DATA --out DIR [--budget-s S]
     python train_real.py --real ... --synth DATA --init DIR/stage1/fish_det_fp32.onnx --lr 5e-4 --seed 1 --out DIR
     python train_real.py --finetune DIR [DIR ...] --base ../models/fish_det_fp32.onnx --out OUT
+    python train_real.py --real ... --synth DATA --arch mnv2 --average A_fp32.onnx B_fp32.onnx ... --out DIR
 
 The renders (DATA/train, DATA/val: sequences `fme synth` wrote, as train.sh makes them) keep the
 detector's synthetic quality; the real pool teaches it real fish. Writes OUT/fish_det_fp32.onnx,
@@ -15,6 +16,10 @@ confidences, timings). Nothing here reads the evaluation sequence mf25-seq2.
 Fine-tuning (`make -C training finetune DATA=DIR`): starts from --base (the bundled fp32 detector),
 trains on DIR's training part for --budget-s seconds at a lower learning rate, and reports P / R on
 DIR's held-out part (real.held_out: blocks of frames, not single frames) before and after.
+
+Averaging (`--average`): no training; the weights of two or more fp32 exports of one layout that
+went on from the same stage are averaged element by element (a "model soup", Wortsman et al.
+2022), then exported, quantised, scored and calibrated as a trained stage is.
 """
 import argparse
 import os
@@ -88,6 +93,8 @@ def main():
     ap.add_argument("--finetune", nargs="*", default=None, help="fine-tune on these folders instead")
     ap.add_argument("--base", default=os.path.join(HERE, "..", "models", "fish_det_fp32.onnx"))
     ap.add_argument("--init", default="", help="an fp32 detector to go on training from (the recipe's second stage)")
+    ap.add_argument("--average", nargs="+", default=None, metavar="FP32",
+                    help="train nothing: average these fp32 exports' weights (one layout, one common start)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", required=True)
     ap.add_argument("--arch", default="full", choices=sorted(det.ARCHS) + sorted(det.PRETRAINED_ARCHS),
@@ -117,6 +124,8 @@ def main():
 
     t0 = time.time()
     finetune = args.finetune is not None
+    if args.average is not None and (finetune or args.init or len(args.average) < 2):
+        raise SystemExit("--average: name two or more fp32 exports, and no --finetune or --init (it trains nothing)")
     if finetune:
         if not args.finetune:
             raise SystemExit("--finetune: name at least one folder (make -C training finetune DATA=DIR)")
@@ -170,12 +179,19 @@ def main():
         before = per_source_quality(args.base, val, args.nms_iou, log, "before")
     lr = args.lr if args.lr is not None else (3e-4 if finetune else 2e-3)
     t1 = time.time()
-    model, epochs_run = det.train(images, boxes, args.epochs, lr=lr, log=log, time_budget_s=args.budget_s, sub=2,
-                                  arch=args.arch, zoom=args.zoom, max_zoom=args.max_zoom, fish_zoom=args.fish_zoom,
-                                  color=np.array(color),
-                                  init=init, seed=args.seed, body_lr_mult=args.body_lr_mult,
-                                  freeze_frac=args.freeze_frac, weights=args.weights,
-                                  freeze_blocks=args.freeze_blocks)
+    if args.average:
+        try:
+            model, epochs_run = det.average(args.average, args.arch), 0
+        except ValueError as e:
+            raise SystemExit(f"--{e}") from None
+        log(f"average: {len(args.average)} exports: {', '.join(args.average)}")
+    else:
+        model, epochs_run = det.train(images, boxes, args.epochs, lr=lr, log=log, time_budget_s=args.budget_s,
+                                      sub=2, arch=args.arch, zoom=args.zoom, max_zoom=args.max_zoom,
+                                      fish_zoom=args.fish_zoom, color=np.array(color),
+                                      init=init, seed=args.seed, body_lr_mult=args.body_lr_mult,
+                                      freeze_frac=args.freeze_frac, weights=args.weights,
+                                      freeze_blocks=args.freeze_blocks)
     train_s = time.time() - t1
     det.export(model, fp32, data.NET_H, data.NET_W)
     res = {"train_seconds": round(train_s, 1), "epochs": args.epochs, "epochs_run": epochs_run, "lr": lr,
@@ -192,6 +208,8 @@ def main():
                     "held_out_percent": real.HELD_OUT_PERCENT}}
     if args.init and not finetune:
         res["init"] = args.init
+    if args.average:
+        res["averaged"] = [os.path.abspath(p) for p in args.average]
     if args.arch in det.PRETRAINED_ARCHS and not finetune and not args.init:
         import pretrained
         w = args.weights or pretrained.weights_path()
