@@ -210,7 +210,7 @@ def main():
         res["init"] = args.init
     if args.average:
         res["averaged"] = [os.path.abspath(p) for p in args.average]
-    if args.arch in det.PRETRAINED_ARCHS and not finetune and not args.init:
+    if args.arch in det.PRETRAINED_ARCHS and not finetune and not args.init and not args.average:
         import pretrained
         w = args.weights or pretrained.weights_path()
         res["pretrained"] = {"weights": w, "source": torch.load(w, map_location="cpu").get("source"),
