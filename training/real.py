@@ -128,18 +128,21 @@ def load_yolo(folder, source, split=None, limit=0):
     return stacked(imgs), boxes, stems
 
 
-def seq_length(seq):
-    """seqinfo.ini's seqLength (0 when absent): frames past it are not part of the sequence."""
+def seqinfo(seq, key):
+    """A number from seqinfo.ini's [Sequence] section (0 when the file or the key is absent)."""
     ini = configparser.ConfigParser()
     ini.read(os.path.join(seq, "seqinfo.ini"))
-    return int(ini.get("Sequence", "seqLength", fallback="0") or 0)
+    return float(ini.get("Sequence", key, fallback="0") or 0)
+
+
+def seq_length(seq):
+    """seqinfo.ini's seqLength (0 when absent): frames past it are not part of the sequence."""
+    return int(seqinfo(seq, "seqLength"))
 
 
 def frame_rate(seq):
     """seqinfo.ini's frameRate (0 when absent)."""
-    ini = configparser.ConfigParser()
-    ini.read(os.path.join(seq, "seqinfo.ini"))
-    return float(ini.get("Sequence", "frameRate", fallback="0") or 0)
+    return seqinfo(seq, "frameRate")
 
 
 def read_mot_gt(seq, with_ids=False):
